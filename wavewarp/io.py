@@ -1,0 +1,31 @@
+"""Atomic file output: write to a temporary sibling, then rename (no half-written files)."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside `path` (same extension); on success it replaces `path`.
+
+    On any exception the temporary file is removed and `path` is left untouched.
+    """
+    path = os.path.abspath(os.fspath(path))
+    directory, name = os.path.split(path)
+    if not os.path.isdir(directory):
+        raise ValueError(f"cannot write {path!r}: folder {directory!r} does not exist")
+    if not os.access(directory, os.W_OK):
+        raise ValueError(f"cannot write {path!r}: folder {directory!r} is not writable")
+    stem, suffix = os.path.splitext(name)
+    handle, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=f".tmp{suffix}", dir=directory)
+    os.close(handle)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(tmp)
+        raise

@@ -1,0 +1,482 @@
+"""Closed triangle control meshes: validation, generators, file I/O, Loop refinement (SPEC §2, §9).
+
+A `Mesh` is validated on construction; a bad mesh raises `ValueError` naming the first
+offending element and the fix. Generators return meshes with well-shaped triangles and
+outward normals; `icosphere` places its control points so that their *limit* points lie on
+the requested sphere.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import cached_property
+
+import numpy as np
+
+from .subdivision import limit_weight, loop_subdivide
+from .topology import Topology
+
+
+class Mesh:
+    """Closed, oriented 2-manifold triangle control mesh.
+
+    `vertices` (V, 3) float64 and `triangles` (T, 3) int32, counter-clockwise seen from
+    outside (outward normals). Both arrays are stored read-only.
+    """
+
+    def __init__(self, vertices, triangles):
+        vertices = np.array(vertices, dtype=np.float64)
+        triangles = np.asarray(triangles)
+        if vertices.ndim != 2 or vertices.shape[1] != 3:
+            raise ValueError(f"vertices must have shape (V, 3), got {vertices.shape}")
+        if triangles.ndim != 2 or triangles.shape[1] != 3:
+            raise ValueError(
+                f"triangles must have shape (T, 3), got {triangles.shape}: "
+                "triangulate polygons with more than three corners first"
+            )
+        if not np.issubdtype(triangles.dtype, np.integer):
+            if triangles.size and not np.all(np.mod(triangles, 1) == 0):
+                raise ValueError("triangles must hold integer vertex indices")
+        triangles = np.array(triangles, dtype=np.int64)
+        _validate(vertices, triangles)
+        vertices.setflags(write=False)
+        self.vertices = vertices
+        self.triangles = triangles.astype(np.int32)
+        self.triangles.setflags(write=False)
+
+    def __repr__(self) -> str:
+        return f"Mesh({self.n_vertices} vertices, {self.n_triangles} triangles)"
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_triangles(self) -> int:
+        return len(self.triangles)
+
+    @cached_property
+    def topology(self) -> Topology:
+        return Topology(self.triangles, self.n_vertices)
+
+    @property
+    def valence(self) -> np.ndarray:
+        return self.topology.valence
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(E, 2) undirected edges, lower index first, sorted."""
+        return _undirected_edges(self.triangles.astype(np.int64))
+
+    @property
+    def needs_refinement(self) -> bool:
+        """True where a triangle touches two or more extraordinary vertices (SPEC §2)."""
+        return bool(np.any((self.valence[self.triangles] != 6).sum(axis=1) > 1))
+
+    def volume(self, x=None) -> float:
+        """Volume enclosed by the control mesh (flat triangles) at positions `x`."""
+        p = self.vertices if x is None else np.asarray(x, dtype=np.float64)
+        a, b, c = (p[self.triangles[:, k]] for k in range(3))
+        return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+    def subdivided(self, levels: int = 1) -> Mesh:
+        """Loop subdivision of the control mesh, `levels` times (Loop's original β)."""
+        if int(levels) != levels or levels < 0:
+            raise ValueError(f"levels must be a non-negative integer, got {levels!r}")
+        vertices, triangles = self.vertices, self.triangles
+        for _ in range(int(levels)):
+            vertices, triangles = loop_subdivide(vertices, triangles)
+        return Mesh(vertices, triangles)
+
+    def refined_for_patches(self) -> Mesh:
+        """This mesh, or its Loop refinement where two extraordinary vertices share a triangle."""
+        return self.subdivided(1) if self.needs_refinement else self
+
+    def limit_mask_matrix(self):
+        """Rows (i, j, weight) of the limit-position mask: limit = L @ control (SPEC §8)."""
+        n = self.valence.astype(np.float64)
+        chi = limit_weight(n)
+        e = self.edges
+        rows = np.concatenate([np.arange(self.n_vertices), e[:, 0], e[:, 1]])
+        cols = np.concatenate([np.arange(self.n_vertices), e[:, 1], e[:, 0]])
+        vals = np.concatenate([1.0 - n * chi, chi[e[:, 0]], chi[e[:, 1]]])
+        return rows, cols, vals
+
+
+# ---------------------------------------------------------------------------------------------
+# Validation
+
+
+def _undirected_edges(triangles: np.ndarray) -> np.ndarray:
+    pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    return np.unique(np.sort(pairs, axis=1), axis=0)
+
+
+def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
+    n_vertices, n_triangles = len(vertices), len(triangles)
+    if n_triangles < 4:
+        raise ValueError(f"a closed mesh needs at least 4 triangles, got {n_triangles}")
+    finite = np.all(np.isfinite(vertices), axis=1)
+    if not np.all(finite):
+        i = int(np.flatnonzero(~finite)[0])
+        raise ValueError(f"vertex {i} has a non-finite coordinate {tuple(vertices[i])}: fix or remove it")
+    out_of_range = (triangles < 0) | (triangles >= n_vertices)
+    if np.any(out_of_range):
+        t = int(np.argwhere(out_of_range)[0, 0])
+        raise ValueError(
+            f"triangle {t} refers to vertex {tuple(int(i) for i in triangles[t])}, but vertex "
+            f"indices must lie in 0..{n_vertices - 1}"
+        )
+    repeated = (
+        (triangles[:, 0] == triangles[:, 1])
+        | (triangles[:, 1] == triangles[:, 2])
+        | (triangles[:, 2] == triangles[:, 0])
+    )
+    if np.any(repeated):
+        t = int(np.flatnonzero(repeated)[0])
+        raise ValueError(
+            f"triangle {t} is degenerate: it repeats a vertex {tuple(int(i) for i in triangles[t])}; "
+            "remove it"
+        )
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    double_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    edge_scale = np.max(np.linalg.norm(np.stack([b - a, c - b, a - c]), axis=2), axis=0)
+    flat = double_area <= 1e-12 * edge_scale**2
+    if np.any(flat):
+        t = int(np.flatnonzero(flat)[0])
+        raise ValueError(
+            f"triangle {t} (vertices {tuple(int(i) for i in triangles[t])}) is degenerate: its "
+            "corners are collinear (zero area); remove it or move its vertices apart"
+        )
+    sorted_tri = np.sort(triangles, axis=1)
+    _, first, counts = np.unique(sorted_tri, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        dup_key = sorted_tri[first[np.flatnonzero(counts > 1)[0]]]
+        same = np.flatnonzero(np.all(sorted_tri == dup_key, axis=1))
+        raise ValueError(
+            f"triangles {int(same[0])} and {int(same[1])} are duplicates (both use vertices "
+            f"{tuple(int(i) for i in dup_key)}): remove one of them"
+        )
+    used = np.zeros(n_vertices, dtype=bool)
+    used[triangles.reshape(-1)] = True
+    if not np.all(used):
+        i = int(np.flatnonzero(~used)[0])
+        raise ValueError(f"vertex {i} belongs to no triangle: remove unused vertices")
+
+    tails = triangles.reshape(-1)
+    heads = np.roll(triangles, -1, axis=1).reshape(-1)
+    owner = np.repeat(np.arange(n_triangles), 3)
+    undirected = np.minimum(tails, heads) * n_vertices + np.maximum(tails, heads)
+    keys, inverse, uses = np.unique(undirected, return_inverse=True, return_counts=True)
+    if np.any(uses == 1):
+        h = int(np.flatnonzero(uses[inverse] == 1)[0])
+        raise ValueError(
+            f"edge ({int(tails[h])}, {int(heads[h])}) belongs only to triangle {int(owner[h])}: "
+            "the mesh is open; close the hole (a shell must be a closed surface)"
+        )
+    if np.any(uses > 2):
+        h = int(np.flatnonzero(uses[inverse] > 2)[0])
+        sharing = owner[inverse == inverse[h]]
+        raise ValueError(
+            f"edge ({int(tails[h])}, {int(heads[h])}) is shared by {len(sharing)} triangles "
+            f"{tuple(int(t) for t in sharing)}: the mesh is non-manifold there; remove the extra "
+            "sheet"
+        )
+    directed = tails * n_vertices + heads
+    order = np.argsort(directed, kind="stable")
+    same_direction = np.flatnonzero(directed[order][1:] == directed[order][:-1])
+    if len(same_direction):
+        h0, h1 = order[same_direction[0]], order[same_direction[0] + 1]
+        raise ValueError(
+            f"triangles {int(owner[h0])} and {int(owner[h1])} both run along edge "
+            f"{int(tails[h0])} -> {int(heads[h0])}: their orientations are inconsistent; reverse "
+            f"the vertex order of one of them (and of every triangle oriented like it)"
+        )
+
+    topology = Topology(triangles, n_vertices)
+    fan = _fan_sizes(topology, n_vertices)
+    incident = np.bincount(triangles.reshape(-1), minlength=n_vertices)
+    pinched = fan != incident
+    if np.any(pinched):
+        i = int(np.flatnonzero(pinched)[0])
+        raise ValueError(
+            f"vertex {i} joins separate fans of triangles (a pinch point): the mesh is "
+            "non-manifold there; give each sheet its own copy of the vertex"
+        )
+    component = _components(n_vertices, keys // n_vertices, keys % n_vertices)
+    if component.max() > 0:
+        other = int(np.flatnonzero(component != component[0])[0])
+        raise ValueError(
+            f"the mesh has {component.max() + 1} separate components (vertices 0 and {other} are "
+            "not connected): make one Mesh per closed shell"
+        )
+    volume = float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+    if volume <= 0.0:
+        raise ValueError(
+            f"the triangles are oriented inward (enclosed volume {volume:.6g} <= 0): reverse the "
+            "vertex order of every triangle, e.g. Mesh(vertices, triangles[:, ::-1])"
+        )
+
+
+def _fan_sizes(topology: Topology, n_vertices: int) -> np.ndarray:
+    """Triangles met walking once around each vertex from one of its edges."""
+    vertices = np.arange(n_vertices)
+    first = topology._first_neighbour(vertices)
+    current = first.copy()
+    size = np.zeros(n_vertices, dtype=np.int64)
+    open_walk = np.ones(n_vertices, dtype=bool)
+    for _ in range(int(topology.valence.max()) + 1):
+        current = np.where(open_walk, topology.third(vertices, current), current)
+        size += open_walk
+        open_walk &= current != first
+        if not open_walk.any():
+            break
+    return size
+
+
+def _components(n_vertices: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Connected-component label of each vertex (label propagation to the smallest index)."""
+    label = np.arange(n_vertices)
+    while True:
+        low = np.minimum(label[a], label[b])
+        updated = label.copy()
+        np.minimum.at(updated, a, low)
+        np.minimum.at(updated, b, low)
+        updated = updated[updated]  # pointer jumping
+        if np.array_equal(updated, label):
+            break
+        label = updated
+    _, dense = np.unique(label, return_inverse=True)
+    return dense
+
+
+# ---------------------------------------------------------------------------------------------
+# Generators
+
+
+def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True) -> Mesh:
+    """Sphere of `radius` from an icosahedron refined `level` times (20·4^level triangles).
+
+    With `limit=True` (default) the control points are placed so that their Loop limit
+    points lie on the sphere; otherwise the control points themselves do.
+    """
+    _check_positive("radius", radius)
+    if int(level) != level or level < 0:
+        raise ValueError(f"level must be a non-negative integer, got {level!r}")
+    phi = (1.0 + 5.0**0.5) / 2.0
+    vertices = np.array(
+        [
+            [-1, phi, 0], [1, phi, 0], [-1, -phi, 0], [1, -phi, 0],
+            [0, -1, phi], [0, 1, phi], [0, -1, -phi], [0, 1, -phi],
+            [phi, 0, -1], [phi, 0, 1], [-phi, 0, -1], [-phi, 0, 1],
+        ],
+        dtype=np.float64,
+    )  # fmt: skip
+    triangles = np.array(
+        [
+            [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
+            [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
+            [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
+            [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        ],
+        dtype=np.int64,
+    )  # fmt: skip
+    vertices /= np.linalg.norm(vertices, axis=1, keepdims=True)
+    for _ in range(int(level)):
+        vertices, triangles = _midpoint_split(vertices, triangles)
+        vertices /= np.linalg.norm(vertices, axis=1, keepdims=True)
+    on_sphere = radius * vertices
+    mesh = Mesh(on_sphere, triangles)
+    if limit:
+        mesh = Mesh(control_points_for_limit(mesh, on_sphere), triangles)
+    return mesh
+
+
+def control_points_for_limit(mesh: Mesh, targets, tol: float = 1e-14, max_iter: int = 1000):
+    """Control points whose Loop limit points equal `targets` (V, 3): solves L X = targets.
+
+    L = (1 - Nχ) I + χ A has its spectrum in (0, 1]; Richardson iteration converges.
+    """
+    targets = np.asarray(targets, dtype=np.float64)
+    rows, cols, vals = mesh.limit_mask_matrix()
+    scale = np.max(np.abs(targets))
+    x = targets.copy()
+    for _ in range(max_iter):
+        lx = np.zeros_like(x)
+        np.add.at(lx, rows, vals[:, None] * x[cols])
+        residual = targets - lx
+        x += residual
+        if np.max(np.abs(residual)) <= tol * scale:
+            return x
+    raise RuntimeError("limit-position fit did not converge")
+
+
+def _midpoint_split(vertices, triangles):
+    n = len(vertices)
+    edges = _undirected_edges(triangles)
+    keys = edges[:, 0] * n + edges[:, 1]
+
+    def mid(i, j):
+        k = np.minimum(i, j) * n + np.maximum(i, j)
+        return n + np.searchsorted(keys, k)
+
+    a, b, c = triangles.T
+    ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
+    new_vertices = np.concatenate([vertices, 0.5 * (vertices[edges[:, 0]] + vertices[edges[:, 1]])])
+    new_triangles = np.concatenate(
+        [np.stack(t, 1) for t in ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))]
+    )
+    return new_vertices, new_triangles
+
+
+def _grid_face(origin, du, dv, n, toward_centre):
+    """Square face split into n×n squares, each cut along the diagonal that points to the
+    face centre (`toward_centre`) so that the face's pattern has its full symmetry."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    points = origin + (i[..., None] * du + j[..., None] * dv) / n
+    index = lambda a, b: a * (n + 1) + b  # noqa: E731
+    triangles = []
+    for a in range(n):
+        for b in range(n):
+            p00, p10, p01, p11 = index(a, b), index(a + 1, b), index(a, b + 1), index(a + 1, b + 1)
+            in_low_a, in_low_b = 2 * a + 1 < n, 2 * b + 1 < n
+            main_diagonal = (in_low_a == in_low_b) if toward_centre else (in_low_a != in_low_b)
+            if main_diagonal:
+                triangles += [(p00, p10, p11), (p00, p11, p01)]
+            else:
+                triangles += [(p00, p10, p01), (p10, p11, p01)]
+    return points.reshape(-1, 3), np.array(triangles)
+
+
+def _merge(parts):
+    """Join (points, triangles) parts, welding coincident points."""
+    points = np.concatenate([p for p, _ in parts])
+    offset = np.cumsum([0] + [len(p) for p, _ in parts])
+    triangles = np.concatenate([t + o for (_, t), o in zip(parts, offset)])
+    scale = np.max(np.abs(points))
+    keys = np.round(points / scale * 1e9).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return points[first], inverse.reshape(-1)[triangles]
+
+
+def cube(edge: float = 1.0, divisions: int = 4) -> Mesh:
+    """Cube of control-mesh `edge` centred at the origin, each face cut into divisions² squares.
+
+    `divisions` must be even; each square is split along the diagonal pointing to its face
+    centre, so the mesh has the full symmetry of the cube: corners have valence 6, face
+    centres 8 and the midpoints of the cube's edges 4. With divisions >= 4 no triangle
+    touches two extraordinary vertices.
+    """
+    _check_positive("edge", edge)
+    _check_even_divisions(divisions)
+    h = 0.5 * edge
+    parts = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            normal = np.zeros(3)
+            normal[axis] = sign
+            du = np.zeros(3)
+            du[(axis + 1) % 3] = edge
+            dv = np.cross(normal, du)
+            origin = h * normal - 0.5 * du - 0.5 * dv
+            parts.append(_grid_face(origin, du, dv, divisions, toward_centre=True))
+    return Mesh(*_merge(parts))
+
+
+def prism(edge: float = 1.0, divisions: int = 4) -> Mesh:
+    """Triangular prism with all edges of length `edge`, centred at the origin, axis along z.
+
+    The equilateral caps are cut into divisions² equilateral triangles, the square sides as in
+    `cube` (diagonals towards the face centre; `divisions` even). Corners have valence 5.
+    """
+    _check_positive("edge", edge)
+    _check_even_divisions(divisions)
+    n = divisions
+    angles = np.pi / 2 + 2 * np.pi * np.arange(3) / 3
+    base = edge / np.sqrt(3.0) * np.stack([np.cos(angles), np.sin(angles), np.zeros(3)], 1)
+    parts = []
+    for z, outward in ((-0.5 * edge, -1.0), (0.5 * edge, 1.0)):
+        corners = base + np.array([0.0, 0.0, z])
+        parts.append(_triangle_cap(corners, n, flip=outward < 0))
+    up = np.array([0.0, 0.0, edge])
+    for k in range(3):
+        a, b = base[k], base[(k + 1) % 3]
+        origin = a - 0.5 * up
+        parts.append(_grid_face(origin, b - a, up, n, toward_centre=True))
+    return Mesh(*_merge(parts))
+
+
+def _triangle_cap(corners, n, flip):
+    """Equilateral triangle (counter-clockwise corners) cut into n² equilateral triangles."""
+    a, b, c = corners
+    index = {}
+    points = []
+    for i in range(n + 1):
+        for j in range(n + 1 - i):
+            index[i, j] = len(points)
+            points.append(a + (b - a) * i / n + (c - a) * j / n)
+    triangles = []
+    for i in range(n):
+        for j in range(n - i):
+            triangles.append((index[i, j], index[i + 1, j], index[i, j + 1]))
+            if i + j + 1 < n:
+                triangles.append((index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]))
+    triangles = np.array(triangles)
+    return np.array(points), triangles[:, ::-1] if flip else triangles
+
+
+def _check_positive(name, value):
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+
+
+def _check_even_divisions(divisions):
+    if int(divisions) != divisions or divisions < 2 or divisions % 2:
+        raise ValueError(f"divisions must be an even integer >= 2, got {divisions!r}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Files
+
+
+def load(path, *, weld: bool = True) -> Mesh:
+    """Read a closed triangle mesh from any file meshio reads.
+
+    With `weld=True` (default) coincident vertices are merged, as formats such as STL store
+    each triangle's corners separately; vertices used by no triangle are dropped.
+    """
+    import meshio
+
+    path = os.fspath(path)
+    try:
+        data = meshio.read(path)
+    except Exception as error:  # meshio raises many types; name the file and the cause
+        raise ValueError(f"cannot read mesh file {path!r}: {error}") from error
+    other = sorted({block.type for block in data.cells if block.type not in ("triangle", "vertex", "line")})
+    if other:
+        raise ValueError(
+            f"{path!r} has {', '.join(other)} cells; wavewarp needs a triangle mesh: triangulate "
+            "it first (e.g. split each quad along a diagonal)"
+        )
+    blocks = [block.data for block in data.cells if block.type == "triangle"]
+    if not blocks:
+        raise ValueError(f"{path!r} contains no triangles")
+    points = np.asarray(data.points, dtype=np.float64)
+    if points.shape[1] == 2:
+        raise ValueError(f"{path!r} holds a planar 2-D mesh; a shell needs 3-D vertices")
+    triangles = np.concatenate(blocks).astype(np.int64)
+    if weld and np.all(np.isfinite(points)):
+        points, triangles = _merge([(points[:, :3], triangles)])
+    used, triangles = np.unique(triangles, return_inverse=True)
+    return Mesh(points[used], triangles.reshape(-1, 3))
+
+
+def save(mesh: Mesh, path) -> None:
+    """Write `mesh` to any format meshio writes (chosen by the extension), atomically."""
+    import meshio
+
+    from .io import atomic_path
+
+    path = os.fspath(path)
+    with atomic_path(path) as tmp:
+        meshio.write(tmp, meshio.Mesh(mesh.vertices, [("triangle", mesh.triangles)]))

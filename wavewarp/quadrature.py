@@ -1,0 +1,55 @@
+"""Symmetric quadrature rules on the parameter triangle {v, w >= 0, v + w <= 1} (SPEC §2).
+
+Weights sum to 1/2, the parameter triangle's area. Rules (Dunavant 1985):
+"3" (degree 2, the default), "6" (degree 4), "7" (degree 5), "12" (degree 6).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+RULES = ("3", "6", "7", "12")
+
+
+def _orbit3(a: float) -> list[tuple[float, float, float]]:
+    b = 1.0 - 2.0 * a
+    return [(a, a, b), (a, b, a), (b, a, a)]
+
+
+def _orbit6(a: float, b: float) -> list[tuple[float, float, float]]:
+    c = 1.0 - a - b
+    return [(a, b, c), (a, c, b), (b, a, c), (b, c, a), (c, a, b), (c, b, a)]
+
+
+def _dunavant(name: str):
+    if name == "3":
+        return [(_orbit3(1.0 / 6.0), 1.0 / 3.0)]
+    if name == "6":
+        return [
+            (_orbit3(0.445948490915965), 0.223381589678011),
+            (_orbit3(0.091576213509771), 0.109951743655322),
+        ]
+    if name == "7":
+        return [
+            ([(1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0)], 0.225),
+            (_orbit3(0.470142064105115), 0.132394152788506),
+            (_orbit3(0.101286507323456), 0.125939180544827),
+        ]
+    if name == "12":
+        return [
+            (_orbit3(0.249286745170910), 0.116786275726379),
+            (_orbit3(0.063089014491502), 0.050844906370207),
+            (_orbit6(0.310352451033784, 0.053145049844817), 0.082851075618374),
+        ]
+    raise ValueError(f"unknown quadrature rule {name!r}; choose one of {', '.join(RULES)}")
+
+
+def triangle_rule(name: str = "3") -> tuple[np.ndarray, np.ndarray]:
+    """Points (P, 2) as (v, w) and weights (P,) of the named rule."""
+    points, weights = [], []
+    for orbit, weight in _dunavant(str(name)):
+        for bary in orbit:
+            points.append(bary[1:])
+            weights.append(weight)
+    weights = np.array(weights)
+    return np.array(points), 0.5 * weights / weights.sum()
