@@ -257,7 +257,10 @@ def _components(n_vertices: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True) -> Mesh:
     """Sphere of `radius` from an icosahedron refined `level` times (20·4^level triangles).
 
-    With `limit=True` (default) the control points are placed so that their Loop limit
+    The icosahedron is refined by Loop subdivision and projected onto the sphere, which
+    spaces the vertices smoothly (midpoint splitting leaves kinks in the spacing along the
+    icosahedron's edges that cost an O(1) mean-curvature error there; docs/geometry.md).
+    With `limit=True` (default) the control points are then placed so that their Loop limit
     points lie on the sphere; otherwise the control points themselves do.
     """
     _check_positive("radius", radius)
@@ -281,10 +284,9 @@ def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True) -> Mes
         ],
         dtype=np.int64,
     )  # fmt: skip
-    vertices /= np.linalg.norm(vertices, axis=1, keepdims=True)
     for _ in range(int(level)):
-        vertices, triangles = _midpoint_split(vertices, triangles)
-        vertices /= np.linalg.norm(vertices, axis=1, keepdims=True)
+        vertices, triangles = loop_subdivide(vertices, triangles)
+    vertices /= np.linalg.norm(vertices, axis=1, keepdims=True)
     on_sphere = radius * vertices
     mesh = Mesh(on_sphere, triangles)
     if limit:
@@ -309,24 +311,6 @@ def control_points_for_limit(mesh: Mesh, targets, tol: float = 1e-14, max_iter: 
         if np.max(np.abs(residual)) <= tol * scale:
             return x
     raise RuntimeError("limit-position fit did not converge")
-
-
-def _midpoint_split(vertices, triangles):
-    n = len(vertices)
-    edges = _undirected_edges(triangles)
-    keys = edges[:, 0] * n + edges[:, 1]
-
-    def mid(i, j):
-        k = np.minimum(i, j) * n + np.maximum(i, j)
-        return n + np.searchsorted(keys, k)
-
-    a, b, c = triangles.T
-    ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-    new_vertices = np.concatenate([vertices, 0.5 * (vertices[edges[:, 0]] + vertices[edges[:, 1]])])
-    new_triangles = np.concatenate(
-        [np.stack(t, 1) for t in ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))]
-    )
-    return new_vertices, new_triangles
 
 
 def _grid_face(origin, du, dv, n, toward_centre):
@@ -450,7 +434,7 @@ def load(path, *, weld: bool = True) -> Mesh:
     path = os.fspath(path)
     try:
         data = meshio.read(path)
-    except Exception as error:  # meshio raises many types; name the file and the cause
+    except (Exception, SystemExit) as error:  # meshio raises many types (even SystemExit)
         raise ValueError(f"cannot read mesh file {path!r}: {error}") from error
     other = sorted({block.type for block in data.cells if block.type not in ("triangle", "vertex", "line")})
     if other:

@@ -2,13 +2,17 @@
 
 Weights sum to 1/2, the parameter triangle's area. Rules (Dunavant 1985):
 "3" (degree 2, the default), "6" (degree 4), "7" (degree 5), "12" (degree 6).
+
+Composite rules "BxS" apply base rule B on each of S = 4^k congruent sub-triangles (k
+midpoint splits), e.g. "3x16". Curvature concentrated at sharp control-mesh corners (cube,
+prism) is integrated far better by a composite rule than by a higher degree (docs/quadrature.md).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-RULES = ("3", "6", "7", "12")
+RULES = ("3", "6", "7", "12")  # base rules; composites "3x4", "12x16", ...
 
 
 def _orbit3(a: float) -> list[tuple[float, float, float]]:
@@ -46,10 +50,38 @@ def _dunavant(name: str):
 
 def triangle_rule(name: str = "3") -> tuple[np.ndarray, np.ndarray]:
     """Points (P, 2) as (v, w) and weights (P,) of the named rule."""
+    name = str(name)
+    if "x" in name:
+        return _composite_rule(name)
     points, weights = [], []
-    for orbit, weight in _dunavant(str(name)):
+    for orbit, weight in _dunavant(name):
         for bary in orbit:
             points.append(bary[1:])
             weights.append(weight)
     weights = np.array(weights)
     return np.array(points), 0.5 * weights / weights.sum()
+
+
+def _composite_rule(name: str) -> tuple[np.ndarray, np.ndarray]:
+    base, _, count = name.partition("x")
+    splits = {4**k: k for k in range(1, 6)}
+    if base not in RULES or not count.isdigit() or int(count) not in splits:
+        raise ValueError(
+            f"unknown quadrature rule {name!r}: a composite rule is BASExS with BASE one of "
+            f"{', '.join(RULES)} and S one of {', '.join(map(str, splits))} (e.g. '3x16')"
+        )
+    corners = [np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])]
+    for _ in range(splits[int(count)]):
+        corners = [
+            child
+            for a, b, c in corners
+            for child in (
+                np.array([a, (a + b) / 2, (a + c) / 2]),
+                np.array([(a + b) / 2, b, (b + c) / 2]),
+                np.array([(a + c) / 2, (b + c) / 2, c]),
+                np.array([(b + c) / 2, (a + c) / 2, (a + b) / 2]),
+            )
+        ]
+    base_points, base_weights = triangle_rule(base)
+    points = [a + base_points[:, :1] * (b - a) + base_points[:, 1:] * (c - a) for a, b, c in corners]
+    return np.concatenate(points), np.tile(base_weights / len(corners), len(corners))

@@ -1,0 +1,128 @@
+"""Limit-surface evaluation at quadrature points (SPEC §2): gather and sum, no per-step tables.
+
+Generic over float32/float64 (`Any`). Symmetric 2x2 tensors (metric, curvature) are `mat22`.
+Quadrature point q lies on triangle t = q // P and reads basis row `type[t] * P + q % P`.
+"""
+
+from typing import Any
+
+import warp as wp
+
+
+@wp.func
+def basis_row(triangle_type: wp.array(dtype=wp.int32), points_per_triangle: int, q: int):
+    t = q // points_per_triangle
+    return t, triangle_type[t] * points_per_triangle + q % points_per_triangle
+
+
+@wp.func
+def patch_jet(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    t: int,
+    row: int,
+):
+    """x, x,1, x,2, x,11, x,12, x,22 of triangle t's patch at basis row `row`."""
+    start = patch_start[t]
+    size = patch_start[t + 1] - start
+    v = x[patch_vertices[start]]
+    b = basis[row, 0]
+    p = b[0] * v
+    x1 = b[1] * v
+    x2 = b[2] * v
+    x11 = b[3] * v
+    x12 = b[4] * v
+    x22 = b[5] * v
+    for k in range(1, size):
+        v = x[patch_vertices[start + k]]
+        b = basis[row, k]
+        p += b[0] * v
+        x1 += b[1] * v
+        x2 += b[2] * v
+        x11 += b[3] * v
+        x12 += b[4] * v
+        x22 += b[5] * v
+    return p, x1, x2, x11, x12, x22
+
+
+@wp.func
+def first_form(x1: Any, x2: Any):
+    """Metric a_αβ = a_α·a_β."""
+    a12 = wp.dot(x1, x2)
+    return wp.matrix(wp.dot(x1, x1), a12, a12, wp.dot(x2, x2), shape=(2, 2))
+
+
+@wp.func
+def second_form(n: Any, x11: Any, x12: Any, x22: Any):
+    """Curvature b_αβ = n·x,αβ (negative definite on a sphere with outward n)."""
+    b12 = wp.dot(n, x12)
+    return wp.matrix(wp.dot(n, x11), b12, b12, wp.dot(n, x22), shape=(2, 2))
+
+
+@wp.func
+def mean_curvature(a: Any, b: Any):
+    """H = -½ a^{αβ} b_αβ: +1/R on a sphere with outward normals (SPEC §9 sign)."""
+    trace = wp.trace(wp.inverse(a) * b)
+    return -trace * type(trace)(0.5)
+
+
+@wp.func
+def gauss_curvature(a: Any, b: Any):
+    """K = det b / det a."""
+    return wp.determinant(b) / wp.determinant(a)
+
+
+@wp.kernel
+def limit_surface_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    points: wp.array(dtype=Any),
+    tangents: wp.array2d(dtype=Any),
+    normals: wp.array(dtype=Any),
+    metric: wp.array(dtype=Any),
+    curvature: wp.array(dtype=Any),
+    area: wp.array(dtype=Any),
+    mean: wp.array(dtype=Any),
+    gauss: wp.array(dtype=Any),
+):
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    cross = wp.cross(x1, x2)
+    j = wp.length(cross)
+    n = cross / j
+    a = first_form(x1, x2)
+    b = second_form(n, x11, x12, x22)
+    points[q] = p
+    tangents[q, 0] = x1
+    tangents[q, 1] = x2
+    normals[q] = n
+    metric[q] = a
+    curvature[q] = b
+    area[q] = j * weights[q % points_per_triangle]
+    mean[q] = mean_curvature(a, b)
+    gauss[q] = gauss_curvature(a, b)
+
+
+@wp.kernel
+def limit_positions_kernel(
+    x: wp.array(dtype=Any),
+    ring_start: wp.array(dtype=wp.int32),
+    ring: wp.array(dtype=wp.int32),
+    centre_weight: wp.array(dtype=Any),
+    ring_weight: wp.array(dtype=Any),
+    limit: wp.array(dtype=Any),
+):
+    """Loop's limit mask: (1 - Nχ) x_i + χ Σ_ring x_j (SPEC §8)."""
+    i = wp.tid()
+    s = x[i] * centre_weight[i]
+    for k in range(ring_start[i], ring_start[i + 1]):
+        s += ring_weight[i] * x[ring[k]]
+    limit[i] = s

@@ -1,0 +1,49 @@
+"""Device and dtype choices shared by every computing class (SPEC §9)."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+DTYPES = {"float32": wp.float32, "float64": wp.float64}
+
+
+def resolve_device(device=None) -> wp.context.Device:
+    """Warp device for "cpu", "cuda", "cuda:N"; None picks CUDA when present, else the CPU."""
+    wp.init()
+    if device is None:
+        return wp.get_device("cuda:0" if wp.is_cuda_available() else "cpu")
+    try:
+        return wp.get_device(device)
+    except (RuntimeError, ValueError) as error:
+        available = ", ".join(d.alias for d in wp.get_devices())
+        raise ValueError(f"device {device!r} is not available ({error}); available: {available}") from None
+
+
+def resolve_dtype(dtype="float32"):
+    """Warp scalar type for "float32" / "float64" (NumPy and Warp float types accepted too)."""
+    if dtype in (wp.float32, wp.float64):
+        return dtype
+    try:
+        name = np.dtype(dtype).name
+    except TypeError:
+        name = str(dtype)
+    if name not in DTYPES:
+        raise ValueError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    return DTYPES[name]
+
+
+def numpy_dtype(scalar) -> np.dtype:
+    return np.dtype(np.float32 if scalar == wp.float32 else np.float64)
+
+
+def vec3(scalar):
+    return wp.types.vector(3, scalar)
+
+
+def vec6(scalar):
+    return wp.types.vector(6, scalar)
+
+
+def mat22(scalar):
+    return wp.types.matrix((2, 2), scalar)
