@@ -1,0 +1,21 @@
+"""wavewarp: chemical waves on active elastic shells (Loop-subdivision Koiter shells in Warp)."""
+
+import os as _os
+from importlib.metadata import PackageNotFoundError, version
+from importlib.util import find_spec as _find_spec
+
+if _find_spec("wavewarp.kernels") is None:  # imported from a source tree: kernels/ sits beside us
+    __path__.append(_os.path.dirname(_os.path.dirname(_os.path.abspath(__file__))))
+
+try:
+    __version__ = version("wavewarp")
+except PackageNotFoundError:  # running from a source tree without installation
+    __version__ = "0.0.0+source"
+
+from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
+from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
+
+__all__ = [
+    "LimitSurface", "Mesh", "cube", "icosphere", "limit_positions", "limit_surface", "load", "prism",
+    "sample_points", "save", "__version__",
+]  # fmt: skip

@@ -304,8 +304,7 @@ def control_points_for_limit(mesh: Mesh, targets, tol: float = 1e-14, max_iter: 
     scale = np.max(np.abs(targets))
     x = targets.copy()
     for _ in range(max_iter):
-        lx = np.zeros_like(x)
-        np.add.at(lx, rows, vals[:, None] * x[cols])
+        lx = np.stack([np.bincount(rows, vals * x[cols, k], len(x)) for k in range(3)], axis=1)
         residual = targets - lx
         x += residual
         if np.max(np.abs(residual)) <= tol * scale:

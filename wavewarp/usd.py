@@ -1,0 +1,114 @@
+"""USD animation output (SPEC §9): Z up, Loop subdivision scheme, time-sampled points and field.
+
+Viewers draw the same Loop limit surface the simulation uses, because the control mesh is
+authored with `subdivisionScheme = "loop"`. The file is written to a temporary sibling and
+renamed when complete; an interrupted run (Ctrl-C) still keeps the frames written so far.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .io import atomic_path
+
+# viridis at 0, 1/4, 1/2, 3/4, 1 (matplotlib's table), interpolated linearly
+_VIRIDIS = np.array(
+    [[0.267, 0.005, 0.329], [0.229, 0.322, 0.546], [0.128, 0.567, 0.551], [0.369, 0.789, 0.383], [0.993, 0.906, 0.144]]
+)
+
+
+def colour_map(values, low: float, high: float) -> np.ndarray:
+    """(n, 3) viridis colours of `values` scaled from [low, high]."""
+    s = np.clip((np.asarray(values, dtype=np.float64) - low) / max(high - low, 1e-300), 0.0, 1.0)
+    position = s * (len(_VIRIDIS) - 1)
+    i = np.minimum(position.astype(int), len(_VIRIDIS) - 2)
+    f = (position - i)[:, None]
+    return (1 - f) * _VIRIDIS[i] + f * _VIRIDIS[i + 1]
+
+
+class UsdAnimation:
+    """Context manager writing `/World/Shell` frame by frame.
+
+    `field_name` names the per-vertex scalar (e.g. "concentration"); `field_range` fixes the
+    colour scale. `ground_size` > 0 adds `/World/Ground`, a square at z = 0.
+    """
+
+    def __init__(self, path, triangles, *, fps: float = 24.0, field_name: str = "concentration",
+                 field_range=(0.0, 1.0), ground_size: float = 0.0):  # fmt: skip
+        suffix = os.path.splitext(os.fspath(path))[1]
+        if suffix not in (".usd", ".usda", ".usdc"):
+            raise ValueError(f"USD output {os.fspath(path)!r} must end in .usd, .usda or .usdc")
+        self.path = path
+        self.triangles = np.asarray(triangles, dtype=np.int32)
+        self.fps = float(fps)
+        self.field_name = field_name
+        self.field_range = tuple(float(v) for v in field_range)
+        self.ground_size = float(ground_size)
+        self.frames = 0
+
+    def __enter__(self) -> UsdAnimation:
+        from pxr import Sdf, Usd, UsdGeom, Vt
+
+        self._atomic = atomic_path(self.path)
+        self._tmp = self._atomic.__enter__()
+        self.stage = Usd.Stage.CreateNew(self._tmp)
+        UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
+        self.stage.SetTimeCodesPerSecond(self.fps)
+        world = UsdGeom.Xform.Define(self.stage, "/World")
+        self.stage.SetDefaultPrim(world.GetPrim())
+        self.mesh = UsdGeom.Mesh.Define(self.stage, "/World/Shell")
+        self.mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.loop)
+        self.mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(self.triangles)))
+        self.mesh.CreateFaceVertexIndicesAttr(Vt.IntArray(self.triangles.reshape(-1).tolist()))
+        self.mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+        self.points = self.mesh.CreatePointsAttr()
+        self.extent = self.mesh.CreateExtentAttr()
+        api = UsdGeom.PrimvarsAPI(self.mesh)
+        self.colour = api.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, UsdGeom.Tokens.vertex)
+        self.field = api.CreatePrimvar(self.field_name, Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex)
+        if self.ground_size > 0:
+            self._add_ground()
+        return self
+
+    def _add_ground(self) -> None:
+        from pxr import Gf, UsdGeom, Vt
+
+        g = 0.5 * self.ground_size
+        ground = UsdGeom.Mesh.Define(self.stage, "/World/Ground")
+        ground.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(x, y, 0.0) for x, y in ((-g, -g), (g, -g), (g, g), (-g, g))]))
+        ground.CreateFaceVertexCountsAttr(Vt.IntArray([4]))
+        ground.CreateFaceVertexIndicesAttr(Vt.IntArray([0, 1, 2, 3]))
+        ground.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        ground.CreateDisplayColorAttr(Vt.Vec3fArray([Gf.Vec3f(0.6, 0.6, 0.6)]))
+
+    def add_frame(self, points, field=None, time_code: float | None = None) -> None:
+        """Author one frame: control points (V, 3) and the per-vertex field (V,)."""
+        from pxr import Vt
+
+        points = np.asarray(points, dtype=np.float64)
+        if not np.all(np.isfinite(points)):
+            raise ValueError("refusing to write a frame with non-finite positions")
+        t = float(self.frames if time_code is None else time_code)
+        self.points.Set(Vt.Vec3fArray.FromNumpy(points.astype(np.float32)), t)
+        self.extent.Set(Vt.Vec3fArray.FromNumpy(np.stack([points.min(0), points.max(0)]).astype(np.float32)), t)
+        values = np.zeros(len(points)) if field is None else np.asarray(field, dtype=np.float64)
+        self.field.Set(Vt.FloatArray.FromNumpy(values.astype(np.float32)), t)
+        self.colour.Set(Vt.Vec3fArray.FromNumpy(colour_map(values, *self.field_range).astype(np.float32)), t)
+        if self.frames == 0:
+            self.stage.SetStartTimeCode(t)
+        self.stage.SetEndTimeCode(t)
+        self.frames += 1
+
+    def __exit__(self, kind, error, trace) -> bool:
+        keep = kind is None or (issubclass(kind, KeyboardInterrupt) and self.frames > 0)
+        if keep:
+            self.stage.GetRootLayer().Save()
+        del self.stage
+        if keep:
+            self._atomic.__exit__(None, None, None)  # rename into place
+        else:
+            self._atomic.__exit__(kind, error, trace)  # remove the temporary file
+        return False
