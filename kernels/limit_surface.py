@@ -24,10 +24,16 @@ def patch_jet(
     t: int,
     row: int,
 ):
-    """x, x,1, x,2, x,11, x,12, x,22 of triangle t's patch at basis row `row`."""
+    """x, x,1, x,2, x,11, x,12, x,22 of triangle t's patch at basis row `row`.
+
+    Sums run over positions relative to the patch's first vertex (exact, since the basis is a
+    partition of unity): derivatives then cancel at the patch's scale, not the shell's, which
+    keeps float32 curvature accurate on large shells.
+    """
     start = patch_start[t]
     size = patch_start[t + 1] - start
-    v = x[patch_vertices[start]]
+    origin = x[patch_vertices[start]]
+    v = origin - origin
     b = basis[row, 0]
     p = b[0] * v
     x1 = b[1] * v
@@ -36,7 +42,7 @@ def patch_jet(
     x12 = b[4] * v
     x22 = b[5] * v
     for k in range(1, size):
-        v = x[patch_vertices[start + k]]
+        v = x[patch_vertices[start + k]] - origin
         b = basis[row, k]
         p += b[0] * v
         x1 += b[1] * v
@@ -44,7 +50,7 @@ def patch_jet(
         x11 += b[3] * v
         x12 += b[4] * v
         x22 += b[5] * v
-    return p, x1, x2, x11, x12, x22
+    return p + origin, x1, x2, x11, x12, x22
 
 
 @wp.func
@@ -126,3 +132,20 @@ def limit_positions_kernel(
     for k in range(ring_start[i], ring_start[i + 1]):
         s += ring_weight[i] * x[ring[k]]
     limit[i] = s
+
+
+@wp.func
+def patch_scalar(
+    c: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    t: int,
+    row: int,
+):
+    """Σ N_k c_k of triangle t's patch at basis row `row` (a field on the surface, SPEC §2)."""
+    start = patch_start[t]
+    value = basis[row, 0][0] * c[patch_vertices[start]]
+    for k in range(1, patch_start[t + 1] - start):
+        value += basis[row, k][0] * c[patch_vertices[start + k]]
+    return value

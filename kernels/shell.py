@@ -1,0 +1,299 @@
+"""Koiter shell energy and exact forces at quadrature points (SPEC §3).
+
+Global sums (energy, volume) accumulate in float64 whatever the dtype, so that float32 runs
+resolve energy changes and V - V̄ far below the float32 spacing of their totals.
+
+One thread per quadrature point. The active reference (ā⁻¹, ā, b̄, dω̄ weight) is computed by
+`active_reference_kernel` whenever c changes; the energy kernels read it. Forces are the exact
+negative gradient, scattered to the patch's control vertices with atomics (or written to
+per-slot buffers and gathered in a fixed order, for bitwise-reproducible sums).
+"""
+
+from typing import Any
+
+import warp as wp
+
+from .limit_surface import basis_row, first_form, patch_jet, patch_scalar, second_form
+
+KOITER = wp.constant(0)
+BILAYER = wp.constant(1)
+
+
+@wp.kernel
+def active_reference_kernel(
+    c: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    rest_metric: wp.array(dtype=Any),
+    rest_curvature: wp.array(dtype=Any),
+    model: int,
+    AC: Any,
+    AI: Any,
+    bilayer_A: Any,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+):
+    """ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰ (paper Eq. 2); bilayer: b̄ = Λ b̄⁰ - A c ā⁰ (docs/shell.md)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
+    one = type(cq)(1.0)
+    stretch = wp.exp(-AC * cq)
+    a0 = rest_metric[q]
+    a_bar = stretch * a0
+    if model == KOITER:
+        b_bar = (one - AI * cq) * rest_curvature[q]
+    else:
+        b_bar = wp.sqrt(stretch) * rest_curvature[q] - (bilayer_A * cq) * a0
+    ref_metric[q] = a_bar
+    ref_metric_inv[q] = wp.inverse(a_bar)
+    ref_curvature[q] = b_bar
+    ref_weight[q] = wp.sqrt(wp.determinant(a_bar)) * weights[q % points_per_triangle]
+
+
+@wp.func
+def material_energy(strain: Any, nu: Any):
+    """(1-ν) tr(E²) + ν (tr E)² of a mixed strain tensor."""
+    tr = wp.trace(strain)
+    return (type(nu)(1.0) - nu) * wp.trace(strain * strain) + nu * tr * tr
+
+
+@wp.func
+def material_stress(strain: Any, inv: Any, nu: Any):
+    """∂/∂(covariant tensor) of material_energy(inv (X - X̄)): 2(1-ν) inv E ... symmetric."""
+    two = type(nu)(2.0)
+    return two * (type(nu)(1.0) - nu) * (strain * inv) + (two * nu * wp.trace(strain)) * inv
+
+
+@wp.func
+def koiter_jet(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    t: int,
+    row: int,
+    ref_inv: Any,
+    ref_metric: Any,
+    ref_curvature: Any,
+    nu: Any,
+):
+    """Strains of the limit surface at one point: E = ā⁻¹(a - ā), K = ā⁻¹(b - b̄), plus the jet."""
+    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    cross = wp.cross(x1, x2)
+    j = wp.length(cross)
+    n = cross / j
+    membrane = ref_inv * (first_form(x1, x2) - ref_metric)
+    bending = ref_inv * (second_form(n, x11, x12, x22) - ref_curvature)
+    return membrane, bending, x1, x2, x11, x12, x22, n, j
+
+
+@wp.kernel
+def koiter_energy_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+    stretching_modulus: Any,
+    bending_modulus: Any,
+    nu: Any,
+    energy: wp.array(dtype=Any),
+):
+    """E_S + E_B (SPEC §3) accumulated into energy[0]; differentiable (the autodiff path)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    membrane, bending, x1, x2, x11, x12, x22, n, j = koiter_jet(
+        x, patch_start, patch_vertices, basis, t, row, ref_metric_inv[q], ref_metric[q], ref_curvature[q], nu
+    )
+    density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
+    wp.atomic_add(energy, 0, type(energy[0])(density * ref_weight[q]))
+
+
+@wp.func
+def scatter_gradient(
+    forces: wp.array(dtype=Any),
+    slots: wp.array(dtype=Any),
+    deterministic: int,
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    t: int,
+    row: int,
+    slot_start: int,
+    g: Any,
+    g1: Any,
+    g2: Any,
+    g11: Any,
+    g12: Any,
+    g22: Any,
+):
+    """F_I -= N_I g + N_I,1 g1 + N_I,2 g2 + N_I,11 g11 + N_I,12 g12 + N_I,22 g22 over the patch."""
+    start = patch_start[t]
+    for k in range(patch_start[t + 1] - start):
+        b = basis[row, k]
+        f = -(b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22)
+        if deterministic == 0:
+            wp.atomic_add(forces, patch_vertices[start + k], f)
+        else:
+            slots[slot_start + k] = f
+
+
+@wp.kernel
+def koiter_forces_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+    stretching_modulus: Any,
+    bending_modulus: Any,
+    nu: Any,
+    deterministic: int,
+    energy: wp.array(dtype=Any),
+    forces: wp.array(dtype=Any),
+    slots: wp.array(dtype=Any),
+):
+    """Energy and the exact forces -∂(E_S + E_B)/∂x in one pass (hand-derived, docs/shell.md)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    inv = ref_metric_inv[q]
+    membrane, bending, x1, x2, x11, x12, x22, n, j = koiter_jet(
+        x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q], nu
+    )
+    w = ref_weight[q]
+    density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
+    wp.atomic_add(energy, 0, type(energy[0])(density * w))
+    # ∂W/∂a_αβ = S, ∂W/∂b_αβ = B (symmetric)
+    S = (stretching_modulus * w) * material_stress(membrane, inv, nu)
+    B = (bending_modulus * w) * material_stress(bending, inv, nu)
+    two = type(w)(2.0)
+    # a_αβ = a_α·a_β  ->  ∂/∂a_γ = 2 S_γβ a_β
+    g1 = two * (S[0, 0] * x1 + S[0, 1] * x2)
+    g2 = two * (S[1, 0] * x1 + S[1, 1] * x2)
+    # b_αβ = n·x,αβ with n = a_1×a_2/|a_1×a_2|: through n, m·dn = u·d(a_1×a_2), u = (I - nnᵀ) m / j
+    m = B[0, 0] * x11 + two * B[0, 1] * x12 + B[1, 1] * x22
+    u = (m - wp.dot(n, m) * n) / j
+    g1 += wp.cross(x2, u)
+    g2 += wp.cross(u, x1)
+    zero = x1 * type(w)(0.0)
+    slot_start = points_per_triangle * patch_start[t] + (q % points_per_triangle) * (patch_start[t + 1] - patch_start[t])
+    scatter_gradient(
+        forces, slots, deterministic, patch_start, patch_vertices, basis, t, row, slot_start,
+        zero, g1, g2, B[0, 0] * n, two * B[0, 1] * n, B[1, 1] * n,
+    )  # fmt: skip
+
+
+@wp.kernel
+def centroid_kernel(x: wp.array(dtype=Any), centroid: wp.array(dtype=wp.vec3d)):
+    """centroid[0] += x_i / V (float64): the origin of the volume integral."""
+    i = wp.tid()
+    wp.atomic_add(centroid, 0, wp.vec3d(x[i]) / wp.float64(x.shape[0]))
+
+
+@wp.kernel
+def volume_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    centroid: wp.array(dtype=wp.vec3d),
+    volume: wp.array(dtype=wp.float64),
+    normal_sum: wp.array(dtype=wp.vec3d),
+):
+    """V = ⅓ ∫ (x - x̄)·n dω on the limit surface (SPEC §3), x̄ the control centroid, which makes
+    the quadrature exactly translation invariant; also accumulates S = ⅓ ∫ n dω for ∂V/∂x̄."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
+    wp.atomic_add(volume, 0, wp.dot(wp.vec3d(p) - centroid[0], area_normal))
+    wp.atomic_add(normal_sum, 0, area_normal)
+
+
+@wp.kernel
+def volume_energy_kernel(volume: wp.array(dtype=wp.float64), target: wp.float64, penalty: wp.float64,
+                         energy: wp.array(dtype=wp.float64)):  # fmt: skip
+    """E_V = μV (V - V̄)² added to energy[0] (single thread; global sums are float64)."""
+    d = volume[0] - target
+    wp.atomic_add(energy, 0, penalty * d * d)
+
+
+@wp.kernel
+def volume_forces_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    centroid: wp.array(dtype=wp.vec3d),
+    volume: wp.array(dtype=wp.float64),
+    target: wp.float64,
+    penalty: wp.float64,
+    deterministic: int,
+    forces: wp.array(dtype=Any),
+    slots: wp.array(dtype=Any),
+):
+    """-∂E_V/∂x through the patch: 2 μV (V - V̄) ⅓ w [dx·(a_1×a_2) + da_1·(a_2×r) + da_2·(r×a_1)], r = x - x̄."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    w = weights[q % points_per_triangle]
+    scale = type(w)(wp.float64(2.0) / wp.float64(3.0) * penalty * (volume[0] - target)) * w
+    r = p - type(p)(centroid[0])
+    zero = x1 * type(w)(0.0)
+    slot_start = points_per_triangle * patch_start[t] + (q % points_per_triangle) * (patch_start[t + 1] - patch_start[t])
+    scatter_gradient(
+        forces, slots, deterministic, patch_start, patch_vertices, basis, t, row, slot_start,
+        scale * wp.cross(x1, x2), scale * wp.cross(x2, r), scale * wp.cross(r, x1), zero, zero, zero,
+    )  # fmt: skip
+
+
+@wp.kernel
+def volume_centroid_forces_kernel(
+    volume: wp.array(dtype=wp.float64),
+    normal_sum: wp.array(dtype=wp.vec3d),
+    target: wp.float64,
+    penalty: wp.float64,
+    forces: wp.array(dtype=Any),
+):
+    """The x̄ part of -∂E_V/∂x_i: + 2 μV (V - V̄) S / N on every vertex."""
+    i = wp.tid()
+    f = normal_sum[0] * (wp.float64(2.0) * penalty * (volume[0] - target) / wp.float64(forces.shape[0]))
+    forces[i] = forces[i] + type(forces[i])(f)
+
+
+@wp.kernel
+def gather_slots_kernel(
+    slots: wp.array(dtype=Any),
+    vertex_slot_start: wp.array(dtype=wp.int32),
+    vertex_slots: wp.array(dtype=wp.int32),
+    forces: wp.array(dtype=Any),
+):
+    """Deterministic scatter: each vertex adds its slots in a fixed order."""
+    i = wp.tid()
+    f = forces[i]
+    for k in range(vertex_slot_start[i], vertex_slot_start[i + 1]):
+        f += slots[vertex_slots[k]]
+    forces[i] = f

@@ -1,0 +1,298 @@
+"""Koiter shell mechanics (SPEC §3, §9): energy, exact forces and quasi-static relaxation.
+
+`Shell` holds the static model on one device (patch tables, rest geometry ā⁰ and b̄⁰ at the
+quadrature points, moduli, V̄) and evaluates, for positions x and control concentrations c,
+
+    E = E_S + E_B + μV (V - V̄)²   with   ā = e^{-AC c} ā⁰,  b̄ = (1 - AI c) b̄⁰   (paper Eq. 2)
+
+and F = -∂E/∂x, either hand-derived (`gradient="analytic"`, one pass for energy and forces)
+or by Warp's automatic differentiation of the energy kernel (`gradient="autodiff"`, the
+reference path). Device-level methods (`*_device`) take and fill Warp arrays without
+host round-trips, for steppers; the NumPy methods are the public API.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import warp as wp
+
+from .device import mat22, numpy_dtype
+from .geometry import SurfaceTables, checked_positions, evaluate
+from .kernels.shell import (
+    active_reference_kernel,
+    gather_slots_kernel,
+    koiter_energy_kernel,
+    koiter_forces_kernel,
+    centroid_kernel,
+    volume_centroid_forces_kernel,
+    volume_energy_kernel,
+    volume_forces_kernel,
+    volume_kernel,
+)
+from .mesh import Mesh
+
+MODELS = {"koiter": 0, "bilayer": 1}
+GRADIENTS = ("analytic", "autodiff")
+
+
+class RelaxationError(RuntimeError):
+    """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped."""
+
+    def __init__(self, message: str, residual: float, x: np.ndarray):
+        super().__init__(message)
+        self.residual = residual
+        self.x = x
+
+
+def _positive(name: str, value) -> float:
+    value = float(value)
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return value
+
+
+def _finite(name: str, value) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return value
+
+
+class Shell:
+    """Active Koiter shell on the Loop limit surface of `mesh` (its vertices are the rest state).
+
+    thickness h, young Y, poisson ν ∈ (-1, 0.5); AC, AI the active metric and curvature
+    couplings; volume_penalty μV; model "koiter" or "bilayer" (bilayer_radius R sets
+    A = (AC/2 - AI)/R, default the radius of the sphere with the rest area); rule the quadrature;
+    gradient "analytic" or "autodiff"; deterministic=True sums forces in a fixed order.
+    """
+
+    def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
+                 model="koiter", *, rule="3", gradient="analytic", deterministic=False, bilayer_radius=None,
+                 device=None, dtype="float32"):  # fmt: skip
+        if not isinstance(mesh, Mesh):
+            raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
+        self.mesh = mesh
+        self.thickness = _positive("thickness", thickness)
+        self.young = _positive("young", young)
+        self.poisson = _finite("poisson", poisson)
+        if not -1.0 < self.poisson < 0.5:
+            raise ValueError(f"poisson must lie in (-1, 0.5), got {poisson!r}")
+        self.AC, self.AI = _finite("AC", AC), _finite("AI", AI)
+        self.volume_penalty = _finite("volume_penalty", volume_penalty)
+        if self.volume_penalty < 0:
+            raise ValueError(f"volume_penalty must be >= 0, got {volume_penalty!r}")
+        if model not in MODELS:
+            raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
+        if gradient not in GRADIENTS:
+            raise ValueError(f"gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+        self.model, self.gradient, self.deterministic = model, gradient, bool(deterministic)
+
+        self.tables = SurfaceTables.of(mesh, str(rule), device=device, dtype=dtype)
+        self.device, self.scalar, self.vec3 = self.tables.device, self.tables.scalar, self.tables.vec3
+        self._real = numpy_dtype(self.scalar)
+        n_q = self.tables.n_quadrature_points
+        rest = evaluate(self.tables, self.tables.positions())
+        self.rest_metric, self.rest_curvature = rest["metric"], rest["curvature"]
+        self.rest_area = float(rest["area"].numpy().astype(np.float64).sum())
+        if bilayer_radius is None:
+            bilayer_radius = math.sqrt(self.rest_area / (4 * math.pi))
+        self.bilayer_radius = _positive("bilayer_radius", bilayer_radius)
+        nu = self.poisson
+        self._moduli = (
+            self.young * self.thickness / (8 * (1 - nu**2)),
+            self.young * self.thickness**3 / (24 * (1 - nu**2)),
+        )
+        m22 = mat22(self.scalar)
+        with wp.ScopedDevice(self.device):
+            self.ref_metric = wp.empty(n_q, dtype=m22)
+            self.ref_metric_inv = wp.empty(n_q, dtype=m22)
+            self.ref_curvature = wp.empty(n_q, dtype=m22)
+            self.ref_weight = wp.empty(n_q, dtype=self.scalar, requires_grad=False)
+            self._energy = wp.zeros(1, dtype=wp.float64, requires_grad=True)
+            self._volume = wp.zeros(1, dtype=wp.float64, requires_grad=True)
+            self._centroid = wp.zeros(1, dtype=wp.vec3d, requires_grad=True)
+            self._normal_sum = wp.zeros(1, dtype=wp.vec3d, requires_grad=True)
+            self._c = wp.zeros(mesh.n_vertices, dtype=self.scalar)
+            self._x = wp.zeros(mesh.n_vertices, dtype=self.vec3, requires_grad=True)
+            self._forces = wp.zeros(mesh.n_vertices, dtype=self.vec3)
+            if self.deterministic:
+                self._slots = wp.zeros(self.tables.points_per_triangle * len(self.tables.host.patch_vertices), dtype=self.vec3)
+                start, order = _vertex_slots(self.tables.host, mesh.n_vertices)
+                self._vertex_slot_start = wp.array(start, dtype=wp.int32)
+                self._vertex_slots = wp.array(order, dtype=wp.int32)
+            else:
+                self._slots = wp.zeros(1, dtype=self.vec3)
+        self.rest_volume = self._volume_of(self.tables.positions())
+        self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
+        self._c_host = None
+
+    # ---------------------------------------------------------------- device-level API
+    def _s(self, value) -> object:
+        return self.scalar(value)
+
+    def update_reference(self, c: wp.array) -> None:
+        """Active reference ā, ā⁻¹, b̄, dω̄ at every quadrature point from control values c."""
+        t = self.tables
+        wp.launch(
+            active_reference_kernel,
+            dim=t.n_quadrature_points,
+            inputs=[c, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
+                    self.rest_metric, self.rest_curvature, MODELS[self.model], self._s(self.AC), self._s(self.AI),
+                    self._s((self.AC / 2 - self.AI) / self.bilayer_radius)],
+            outputs=[self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight],
+            device=self.device,
+        )  # fmt: skip
+
+    def _volume_of(self, x: wp.array) -> float:
+        self._launch_volume(x)
+        return float(self._volume.numpy()[0])
+
+    def _launch_volume(self, x: wp.array) -> None:
+        """V about the control centroid, and S = ⅓ ∫ n dω, into self._volume, self._normal_sum."""
+        t = self.tables
+        for array in (self._centroid, self._volume, self._normal_sum):
+            array.zero_()
+        wp.launch(centroid_kernel, dim=len(x), inputs=[x], outputs=[self._centroid], device=self.device)
+        wp.launch(
+            volume_kernel, dim=t.n_quadrature_points,
+            inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
+                    self._centroid],
+            outputs=[self._volume, self._normal_sum], device=self.device,
+        )  # fmt: skip
+
+    def _elastic_inputs(self, x: wp.array) -> list:
+        t = self.tables
+        return [x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle,
+                self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight,
+                self._s(self._moduli[0]), self._s(self._moduli[1]), self._s(self.poisson)]  # fmt: skip
+
+    def energy_device(self, x: wp.array, energy: wp.array) -> None:
+        """Add E(x) at the current reference to energy[0] (differentiable)."""
+        wp.launch(koiter_energy_kernel, dim=self.tables.n_quadrature_points, inputs=self._elastic_inputs(x),
+                  outputs=[energy], device=self.device)  # fmt: skip
+        if self.volume_penalty > 0:
+            self._launch_volume(x)
+            wp.launch(volume_energy_kernel, dim=1,
+                      inputs=[self._volume, wp.float64(self.rest_volume), wp.float64(self.volume_penalty)],
+                      outputs=[energy], device=self.device)  # fmt: skip
+
+    def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
+        """forces = -∂E/∂x and energy[0] = E at the current reference (both overwritten)."""
+        energy.zero_()
+        forces.zero_()
+        if self.gradient == "autodiff":
+            self._autodiff_forces(x, forces, energy)
+            return
+        t = self.tables
+        flag = int(self.deterministic)
+        if self.volume_penalty > 0:
+            target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
+            self._launch_volume(x)
+            wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
+                      device=self.device)  # fmt: skip
+            wp.launch(
+                volume_forces_kernel, dim=t.n_quadrature_points,
+                inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
+                        self._centroid, self._volume, target, penalty, flag],
+                outputs=[forces, self._slots], device=self.device,
+            )  # fmt: skip
+            self._gather(forces)
+            wp.launch(volume_centroid_forces_kernel, dim=len(forces),
+                      inputs=[self._volume, self._normal_sum, target, penalty], outputs=[forces],
+                      device=self.device)  # fmt: skip
+        wp.launch(koiter_forces_kernel, dim=t.n_quadrature_points, inputs=self._elastic_inputs(x) + [flag],
+                  outputs=[energy, forces, self._slots], device=self.device)  # fmt: skip
+        self._gather(forces)
+
+    def _gather(self, forces: wp.array) -> None:
+        if self.deterministic:
+            wp.launch(gather_slots_kernel, dim=self.mesh.n_vertices,
+                      inputs=[self._slots, self._vertex_slot_start, self._vertex_slots], outputs=[forces],
+                      device=self.device)  # fmt: skip
+
+    def _autodiff_forces(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
+        xg = wp.clone(x, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            self.energy_device(xg, energy)
+        tape.backward(loss=energy)
+        wp.launch(_negate, dim=len(forces), inputs=[xg.grad], outputs=[forces], device=self.device)
+        tape.zero()
+
+    # ---------------------------------------------------------------- NumPy API
+    def _set(self, x, c) -> wp.array:
+        x = checked_positions(x, self.mesh.n_vertices)
+        c = np.asarray(c, dtype=np.float64)
+        if c.shape == ():
+            c = np.full(self.mesh.n_vertices, float(c))
+        if c.shape != (self.mesh.n_vertices,):
+            raise ValueError(f"c must have shape ({self.mesh.n_vertices},) for this mesh, got {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError(f"c[{int(np.flatnonzero(~np.isfinite(c))[0])}] is not finite (NaN or Inf)")
+        self._x.assign(x.astype(self._real))
+        if self._c_host is None or not np.array_equal(c, self._c_host):
+            self._c.assign(c.astype(self._real))
+            self.update_reference(self._c)
+            self._c_host = c.copy()
+        return self._x
+
+    def energy(self, x, c=0.0) -> float:
+        """Total energy E_S + E_B + E_V at positions x (V, 3) and control concentrations c (V,)."""
+        xw = self._set(x, c)
+        self._energy.zero_()
+        self.energy_device(xw, self._energy)
+        return float(self._energy.numpy()[0])
+
+    def forces(self, x, c=0.0) -> np.ndarray:
+        """(V, 3) forces, exactly -∂energy/∂x."""
+        xw = self._set(x, c)
+        self.forces_device(xw, self._forces, self._energy)
+        return self._forces.numpy().astype(np.float64)
+
+    def volume(self, x) -> float:
+        """Volume enclosed by the limit surface at positions x."""
+        return self._volume_of(self.tables.positions(checked_positions(x, self.mesh.n_vertices)))
+
+    def force_scale(self) -> float:
+        """Y h ℓ̄: the force on a vertex from a unit strain over one mean control edge ℓ̄."""
+        return self.young * self.thickness * self.edge_length
+
+    def relax(self, x0, c=0.0, tol=None, max_iterations=20000, callback=None) -> np.ndarray:
+        """Quasi-static equilibrium from x0 under concentrations c (SPEC §3).
+
+        Stops when max_I |F_I| <= tol · Y h ℓ̄ (tol is a strain-like number; default 1e-5 in
+        float32, ten times its measured round-off floor, and 1e-9 in float64). Preconditioned nonlinear conjugate gradients with an
+        Armijo line search, so the energy falls monotonically (docs/shell.md). Raises
+        RelaxationError saying how far it got when it does not converge.
+        """
+        from .relax import relax
+
+        if tol is None:
+            tol = 1e-5 if self.scalar == wp.float32 else 1e-9
+        tol = _positive("tol", tol)
+        xw = self._set(x0, c)
+        return relax(self, xw, tol, int(max_iterations), callback)
+
+
+@wp.kernel
+def _negate(a: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    i = wp.tid()
+    out[i] = -a[i]
+
+
+def _vertex_slots(host, n_vertices: int):
+    """For the deterministic scatter: each vertex's slots in (triangle, point, k) order."""
+    P = host.points_per_triangle
+    sizes = np.diff(host.patch_start)
+    triangle = np.repeat(np.arange(len(sizes)), sizes)
+    k = np.arange(len(host.patch_vertices)) - host.patch_start[triangle]
+    vertex = np.tile(host.patch_vertices, P).reshape(P, -1)
+    slot = P * host.patch_start[triangle][None, :] + np.arange(P)[:, None] * sizes[triangle][None, :] + k[None, :]
+    vertex, slot = vertex.reshape(-1), slot.reshape(-1)
+    order = np.lexsort((slot, vertex))
+    start = np.concatenate([[0], np.cumsum(np.bincount(vertex, minlength=n_vertices))])
+    return start.astype(np.int32), slot[order].astype(np.int32)
