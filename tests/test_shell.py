@@ -207,3 +207,20 @@ def test_bad_arrays_name_the_argument():
         shell.relax(mesh.vertices, 0.0, tol=-1.0)
     with pytest.raises(ValueError, match="must be a wavewarp.mesh.Mesh"):
         Shell(mesh.vertices, 0.1, 1.0)
+
+
+def test_warp_shell_equals_an_independent_numpy_implementation(rng):
+    """benchmarks/numpy_shell.py: the same energy and gradient written with NumPy arrays."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+    from numpy_shell import NumpyShell
+
+    mesh = random_genus0(40, 6).subdivided(1)
+    x, c = perturbed(mesh, rng), rng.random(mesh.n_vertices)
+    parameters = dict(thickness=0.07, young=2.0, AC=0.3, AI=-0.4, volume_penalty=1.5)
+    energy, forces = NumpyShell(mesh, **parameters).energy_and_forces(x, c)
+    shell = Shell(mesh, **parameters, device="cpu", **F64)
+    assert shell.energy(x, c) == pytest.approx(energy, rel=1e-12)
+    np.testing.assert_allclose(shell.forces(x, c), forces, atol=1e-12 * np.abs(forces).max())

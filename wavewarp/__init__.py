@@ -14,8 +14,9 @@ except PackageNotFoundError:  # running from a source tree without installation
 
 from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
 from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
+from .shell import RelaxationError, Shell  # noqa: E402
 
 __all__ = [
-    "LimitSurface", "Mesh", "cube", "icosphere", "limit_positions", "limit_surface", "load", "prism",
+    "LimitSurface", "Mesh", "RelaxationError", "Shell", "cube", "icosphere", "limit_positions", "limit_surface", "load", "prism",
     "sample_points", "save", "__version__",
 ]  # fmt: skip
