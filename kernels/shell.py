@@ -109,16 +109,16 @@ def koiter_energy_kernel(
     stretching_modulus: Any,
     bending_modulus: Any,
     nu: Any,
-    energy: wp.array(dtype=Any),
+    energy_density: wp.array(dtype=wp.float64),
 ):
-    """E_S + E_B (SPEC §3) accumulated into energy[0]; differentiable (the autodiff path)."""
+    """(E_S + E_B) density × dω̄ at every point (SPEC §3), in float64; differentiable (autodiff path)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
     membrane, bending, x1, x2, x11, x12, x22, n, j = koiter_jet(
         x, patch_start, patch_vertices, basis, t, row, ref_metric_inv[q], ref_metric[q], ref_curvature[q], nu
     )
     density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
-    wp.atomic_add(energy, 0, type(energy[0])(density * ref_weight[q]))
+    energy_density[q] = wp.float64(density * ref_weight[q])
 
 
 @wp.func
@@ -166,11 +166,11 @@ def koiter_forces_kernel(
     bending_modulus: Any,
     nu: Any,
     deterministic: int,
-    energy: wp.array(dtype=Any),
+    energy_density: wp.array(dtype=wp.float64),
     forces: wp.array(dtype=Any),
     slots: wp.array(dtype=Any),
 ):
-    """Energy and the exact forces -∂(E_S + E_B)/∂x in one pass (hand-derived, docs/shell.md)."""
+    """Energy density and the exact forces -∂(E_S + E_B)/∂x in one pass (hand-derived, docs/shell.md)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
     inv = ref_metric_inv[q]
@@ -179,7 +179,7 @@ def koiter_forces_kernel(
     )
     w = ref_weight[q]
     density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
-    wp.atomic_add(energy, 0, type(energy[0])(density * w))
+    energy_density[q] = wp.float64(density * w)
     # ∂W/∂a_αβ = S, ∂W/∂b_αβ = B (symmetric)
     S = (stretching_modulus * w) * material_stress(membrane, inv, nu)
     B = (bending_modulus * w) * material_stress(bending, inv, nu)
@@ -201,10 +201,15 @@ def koiter_forces_kernel(
 
 
 @wp.kernel
-def centroid_kernel(x: wp.array(dtype=Any), centroid: wp.array(dtype=wp.vec3d)):
-    """centroid[0] += x_i / V (float64): the origin of the volume integral."""
+def sum_kernel(values: wp.array(dtype=Any), total: wp.array(dtype=Any)):
+    """total[0] += Σ values (differentiable; the analytic path reduces with wp.utils.array_sum)."""
     i = wp.tid()
-    wp.atomic_add(centroid, 0, wp.vec3d(x[i]) / wp.float64(x.shape[0]))
+    wp.atomic_add(total, 0, values[i])
+
+
+@wp.func
+def control_centroid(x_sum: wp.array(dtype=Any), n_vertices: int):
+    return wp.vec3d(x_sum[0]) / wp.float64(n_vertices)
 
 
 @wp.kernel
@@ -216,18 +221,18 @@ def volume_kernel(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
-    centroid: wp.array(dtype=wp.vec3d),
-    volume: wp.array(dtype=wp.float64),
-    normal_sum: wp.array(dtype=wp.vec3d),
+    x_sum: wp.array(dtype=Any),
+    volume_terms: wp.array(dtype=wp.float64),
+    normal_terms: wp.array(dtype=wp.vec3d),
 ):
-    """V = ⅓ ∫ (x - x̄)·n dω on the limit surface (SPEC §3), x̄ the control centroid, which makes
-    the quadrature exactly translation invariant; also accumulates S = ⅓ ∫ n dω for ∂V/∂x̄."""
+    """Terms of V = ⅓ ∫ (x - x̄)·n dω (SPEC §3), x̄ = Σx/N the control centroid, which makes the
+    quadrature exactly translation invariant; and of S = ⅓ ∫ n dω, needed for ∂V/∂x̄."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
     p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
     area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
-    wp.atomic_add(volume, 0, wp.dot(wp.vec3d(p) - centroid[0], area_normal))
-    wp.atomic_add(normal_sum, 0, area_normal)
+    volume_terms[q] = wp.dot(wp.vec3d(p) - control_centroid(x_sum, x.shape[0]), area_normal)
+    normal_terms[q] = area_normal
 
 
 @wp.kernel
@@ -247,7 +252,7 @@ def volume_forces_kernel(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
-    centroid: wp.array(dtype=wp.vec3d),
+    x_sum: wp.array(dtype=Any),
     volume: wp.array(dtype=wp.float64),
     target: wp.float64,
     penalty: wp.float64,
@@ -261,7 +266,7 @@ def volume_forces_kernel(
     p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
     w = weights[q % points_per_triangle]
     scale = type(w)(wp.float64(2.0) / wp.float64(3.0) * penalty * (volume[0] - target)) * w
-    r = p - type(p)(centroid[0])
+    r = p - type(p)(control_centroid(x_sum, x.shape[0]))
     zero = x1 * type(w)(0.0)
     slot_start = points_per_triangle * patch_start[t] + (q % points_per_triangle) * (patch_start[t + 1] - patch_start[t])
     scatter_gradient(

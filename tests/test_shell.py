@@ -26,8 +26,9 @@ def perturbed(mesh, rng, amount=0.02):
 def test_rest_state_has_zero_energy_and_forces(make, device):
     mesh = make()
     shell = Shell(mesh, 0.05, 1e3, **ACTIVE, device=device, **F64)
-    assert shell.energy(mesh.vertices, 0.0) == 0.0
-    assert np.abs(shell.forces(mesh.vertices, 0.0)).max() == 0.0
+    # exactly zero on the CPU; CUDA contracts some products into FMAs, leaving round-off
+    assert abs(shell.energy(mesh.vertices, 0.0)) <= 1e-24 * shell.young * shell.thickness * shell.rest_area
+    assert np.abs(shell.forces(mesh.vertices, 0.0)).max() <= 1e-12 * shell.force_scale()
 
 
 @pytest.mark.parametrize("model", ["koiter", "bilayer"])

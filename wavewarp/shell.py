@@ -26,7 +26,7 @@ from .kernels.shell import (
     gather_slots_kernel,
     koiter_energy_kernel,
     koiter_forces_kernel,
-    centroid_kernel,
+    sum_kernel,
     volume_centroid_forces_kernel,
     volume_energy_kernel,
     volume_forces_kernel,
@@ -114,8 +114,11 @@ class Shell:
             self.ref_weight = wp.empty(n_q, dtype=self.scalar, requires_grad=False)
             self._energy = wp.zeros(1, dtype=wp.float64, requires_grad=True)
             self._volume = wp.zeros(1, dtype=wp.float64, requires_grad=True)
-            self._centroid = wp.zeros(1, dtype=wp.vec3d, requires_grad=True)
+            self._x_sum = wp.zeros(1, dtype=self.vec3, requires_grad=True)
             self._normal_sum = wp.zeros(1, dtype=wp.vec3d, requires_grad=True)
+            self._energy_density = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
+            self._volume_terms = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
+            self._normal_terms = wp.zeros(n_q, dtype=wp.vec3d, requires_grad=True)
             self._c = wp.zeros(mesh.n_vertices, dtype=self.scalar)
             self._x = wp.zeros(mesh.n_vertices, dtype=self.vec3, requires_grad=True)
             self._forces = wp.zeros(mesh.n_vertices, dtype=self.vec3)
@@ -148,21 +151,29 @@ class Shell:
         )  # fmt: skip
 
     def _volume_of(self, x: wp.array) -> float:
-        self._launch_volume(x)
+        self._launch_volume(x, differentiable=False)
         return float(self._volume.numpy()[0])
 
-    def _launch_volume(self, x: wp.array) -> None:
+    def _sum(self, values: wp.array, total: wp.array, differentiable: bool) -> None:
+        """total[0] = Σ values: a tree reduction, or atomics where Warp's tape must follow."""
+        if differentiable:
+            total.zero_()
+            wp.launch(sum_kernel, dim=len(values), inputs=[values], outputs=[total], device=self.device)
+        else:
+            wp.utils.array_sum(values, out=total)
+
+    def _launch_volume(self, x: wp.array, differentiable: bool) -> None:
         """V about the control centroid, and S = ⅓ ∫ n dω, into self._volume, self._normal_sum."""
         t = self.tables
-        for array in (self._centroid, self._volume, self._normal_sum):
-            array.zero_()
-        wp.launch(centroid_kernel, dim=len(x), inputs=[x], outputs=[self._centroid], device=self.device)
+        self._sum(x, self._x_sum, differentiable)
         wp.launch(
             volume_kernel, dim=t.n_quadrature_points,
             inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
-                    self._centroid],
-            outputs=[self._volume, self._normal_sum], device=self.device,
+                    self._x_sum],
+            outputs=[self._volume_terms, self._normal_terms], device=self.device,
         )  # fmt: skip
+        self._sum(self._volume_terms, self._volume, differentiable)
+        self._sum(self._normal_terms, self._normal_sum, differentiable)
 
     def _elastic_inputs(self, x: wp.array) -> list:
         t = self.tables
@@ -171,42 +182,43 @@ class Shell:
                 self._s(self._moduli[0]), self._s(self._moduli[1]), self._s(self.poisson)]  # fmt: skip
 
     def energy_device(self, x: wp.array, energy: wp.array) -> None:
-        """Add E(x) at the current reference to energy[0] (differentiable)."""
+        """energy[0] = E(x) at the current reference (float64; differentiable with wp.Tape)."""
         wp.launch(koiter_energy_kernel, dim=self.tables.n_quadrature_points, inputs=self._elastic_inputs(x),
-                  outputs=[energy], device=self.device)  # fmt: skip
+                  outputs=[self._energy_density], device=self.device)  # fmt: skip
+        self._sum(self._energy_density, energy, differentiable=True)
         if self.volume_penalty > 0:
-            self._launch_volume(x)
+            self._launch_volume(x, differentiable=True)
             wp.launch(volume_energy_kernel, dim=1,
                       inputs=[self._volume, wp.float64(self.rest_volume), wp.float64(self.volume_penalty)],
                       outputs=[energy], device=self.device)  # fmt: skip
 
     def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
         """forces = -∂E/∂x and energy[0] = E at the current reference (both overwritten)."""
-        energy.zero_()
         forces.zero_()
         if self.gradient == "autodiff":
             self._autodiff_forces(x, forces, energy)
             return
         t = self.tables
         flag = int(self.deterministic)
+        wp.launch(koiter_forces_kernel, dim=t.n_quadrature_points, inputs=self._elastic_inputs(x) + [flag],
+                  outputs=[self._energy_density, forces, self._slots], device=self.device)  # fmt: skip
+        self._gather(forces)
+        self._sum(self._energy_density, energy, differentiable=False)
         if self.volume_penalty > 0:
             target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
-            self._launch_volume(x)
+            self._launch_volume(x, differentiable=False)
             wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
                       device=self.device)  # fmt: skip
             wp.launch(
                 volume_forces_kernel, dim=t.n_quadrature_points,
                 inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
-                        self._centroid, self._volume, target, penalty, flag],
+                        self._x_sum, self._volume, target, penalty, flag],
                 outputs=[forces, self._slots], device=self.device,
             )  # fmt: skip
             self._gather(forces)
             wp.launch(volume_centroid_forces_kernel, dim=len(forces),
                       inputs=[self._volume, self._normal_sum, target, penalty], outputs=[forces],
                       device=self.device)  # fmt: skip
-        wp.launch(koiter_forces_kernel, dim=t.n_quadrature_points, inputs=self._elastic_inputs(x) + [flag],
-                  outputs=[energy, forces, self._slots], device=self.device)  # fmt: skip
-        self._gather(forces)
 
     def _gather(self, forces: wp.array) -> None:
         if self.deterministic:
@@ -216,6 +228,7 @@ class Shell:
 
     def _autodiff_forces(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
         xg = wp.clone(x, requires_grad=True)
+        energy.requires_grad = True
         tape = wp.Tape()
         with tape:
             self.energy_device(xg, energy)
@@ -243,7 +256,6 @@ class Shell:
     def energy(self, x, c=0.0) -> float:
         """Total energy E_S + E_B + E_V at positions x (V, 3) and control concentrations c (V,)."""
         xw = self._set(x, c)
-        self._energy.zero_()
         self.energy_device(xw, self._energy)
         return float(self._energy.numpy()[0])
 
