@@ -55,15 +55,16 @@ def force_rows(mesh, device, numpy_baseline):
     x = mesh.vertices * (1 + 0.01 * rng.standard_normal((mesh.n_vertices, 1)))
     c = rng.random(mesh.n_vertices)
     rows = []
-    for gradient in ("analytic", "autodiff"):
-        for dtype in ("float32", "float64"):
-            shell = Shell(mesh, **PARAMETERS, gradient=gradient, device=device, dtype=dtype)
-            shell.forces(x, c)  # sets x and the active reference on the device
-            seconds = _median_seconds(
-                lambda: shell.forces_device(shell._x, shell._forces, shell._energy),
-                lambda: wp.synchronize_device(shell.device),
-            )
-            rows.append(dict(path=f"warp-{gradient}", dtype=dtype, triangles=mesh.n_triangles, seconds=seconds))
+    variants = [(g, d, False) for g in ("analytic", "autodiff") for d in ("float32", "float64")]
+    for gradient, dtype, deterministic in variants + [("analytic", "float32", True)]:
+        shell = Shell(mesh, **PARAMETERS, gradient=gradient, deterministic=deterministic, device=device, dtype=dtype)
+        shell.forces(x, c)  # sets x and the active reference on the device
+        seconds = _median_seconds(
+            lambda: shell.forces_device(shell._x, shell._forces, shell._energy),
+            lambda: wp.synchronize_device(shell.device),
+        )
+        path = f"warp-{gradient}" + ("-deterministic" if deterministic else "")
+        rows.append(dict(path=path, dtype=dtype, triangles=mesh.n_triangles, seconds=seconds))
     if numpy_baseline:
         baseline = NumpyShell(mesh, **PARAMETERS)
         seconds = _median_seconds(lambda: baseline.energy_and_forces(x, c), lambda: None, repeats=3)
@@ -107,7 +108,7 @@ def main(argv=None) -> int:
         for row in rows:
             if numpy_seconds:
                 row["speedup_vs_numpy"] = numpy_seconds / row["seconds"]
-            print(f"{device.alias:7s} {row['triangles']:>9d} tri  {row['path']:15s} {row['dtype']}  "
+            print(f"{device.alias:7s} {row['triangles']:>9d} tri  {row['path']:29s} {row['dtype']}  "
                   f"{row['triangles_per_second']:10.3e} tri/s" + (f"  x{row['speedup_vs_numpy']:.1f} vs NumPy"
                   if numpy_seconds else ""))  # fmt: skip
         forces += rows
