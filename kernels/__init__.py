@@ -1,0 +1,36 @@
+"""Warp kernels and @wp.func helpers of wavewarp (installed as `wavewarp.kernels`)."""
+
+import warp as wp
+
+SCALARS = (wp.float32, wp.float64)
+
+
+def _element(role: str, scalar):
+    return {
+        "scalar": scalar,
+        "vec3": wp.types.vector(3, scalar),
+        "vec6": wp.types.vector(6, scalar),
+        "mat22": wp.types.matrix((2, 2), scalar),
+    }[role]
+
+
+def declare_overloads(kernel, **roles):
+    """Register a generic kernel's float32 and float64 overloads up front.
+
+    `roles` maps each `Any` argument to "ROLE" (a value), "ROLE[]" (1-D array) or "ROLE[,]"
+    (2-D array), ROLE one of scalar, vec3, vec6, mat22. With every overload known when the
+    module first loads, Warp compiles each module once instead of once per new overload.
+    """
+    for scalar in SCALARS:
+        types = {}
+        for name, role in roles.items():
+            base = role.rstrip("[,]")
+            element = _element(base, scalar)
+            if role.endswith("[,]"):
+                types[name] = wp.array2d(dtype=element)
+            elif role.endswith("[]"):
+                types[name] = wp.array(dtype=element)
+            else:
+                types[name] = element
+        wp.overload(kernel, types)
+    return kernel

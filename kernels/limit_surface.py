@@ -8,6 +8,8 @@ from typing import Any
 
 import warp as wp
 
+from . import declare_overloads
+
 
 @wp.func
 def basis_row(triangle_type: wp.array(dtype=wp.int32), points_per_triangle: int, q: int):
@@ -149,3 +151,13 @@ def patch_scalar(
     for k in range(1, patch_start[t + 1] - start):
         value += basis[row, k][0] * c[patch_vertices[start + k]]
     return value
+
+
+_PATCH = dict(basis="vec6[,]")
+declare_overloads(
+    limit_surface_kernel, x="vec3[]", weights="scalar[]", points="vec3[]", tangents="vec3[,]", normals="vec3[]",
+    metric="mat22[]", curvature="mat22[]", area="scalar[]", mean="scalar[]", gauss="scalar[]", **_PATCH,
+)  # fmt: skip
+declare_overloads(
+    limit_positions_kernel, x="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]", limit="vec3[]"
+)  # fmt: skip

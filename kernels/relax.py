@@ -4,6 +4,8 @@ from typing import Any
 
 import warp as wp
 
+from . import declare_overloads
+
 
 @wp.kernel
 def step_kernel(x: wp.array(dtype=Any), direction: wp.array(dtype=Any), alpha: Any, out: wp.array(dtype=Any)):
@@ -48,3 +50,10 @@ def dot_kernel(a: wp.array(dtype=Any), b: wp.array(dtype=Any), out: wp.array(dty
     """out[0] += Σ a_i·b_i (out zeroed by the caller)."""
     i = wp.tid()
     wp.atomic_add(out, 0, wp.dot(a[i], b[i]))
+
+
+declare_overloads(step_kernel, x="vec3[]", direction="vec3[]", alpha="scalar", out="vec3[]")
+declare_overloads(precondition_kernel, forces="vec3[]", inverse_stiffness="scalar[]", out="vec3[]")
+declare_overloads(direction_kernel, s="vec3[]", beta="scalar", direction="vec3[]")
+declare_overloads(reductions_kernel, forces="vec3[]", s="vec3[]", s_old="vec3[]", direction="vec3[]", out="scalar[]")
+declare_overloads(dot_kernel, a="vec3[]", b="vec3[]", out="scalar[]")

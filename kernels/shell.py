@@ -13,6 +13,7 @@ from typing import Any
 
 import warp as wp
 
+from . import declare_overloads
 from .limit_surface import basis_row, first_form, patch_jet, patch_scalar, second_form
 
 KOITER = wp.constant(0)
@@ -302,3 +303,31 @@ def gather_slots_kernel(
     for k in range(vertex_slot_start[i], vertex_slot_start[i + 1]):
         f += slots[vertex_slots[k]]
     forces[i] = f
+
+
+@wp.kernel
+def negate_kernel(a: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """out = -a (autodiff forces from the energy gradient)."""
+    i = wp.tid()
+    out[i] = -a[i]
+
+
+_PATCH = dict(basis="vec6[,]")
+_REFERENCE = dict(ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]")
+_MODULI = dict(stretching_modulus="scalar", bending_modulus="scalar", nu="scalar")
+declare_overloads(
+    active_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]", rest_curvature="mat22[]",
+    AC="scalar", AI="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE,
+)  # fmt: skip
+declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
+declare_overloads(koiter_forces_kernel, x="vec3[]", forces="vec3[]", slots="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
+declare_overloads(volume_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", **_PATCH)
+declare_overloads(
+    volume_forces_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", forces="vec3[]", slots="vec3[]", **_PATCH
+)  # fmt: skip
+declare_overloads(volume_centroid_forces_kernel, forces="vec3[]")
+declare_overloads(gather_slots_kernel, slots="vec3[]", forces="vec3[]")
+declare_overloads(negate_kernel, a="vec3[]", out="vec3[]")
+declare_overloads(sum_kernel, values="vec3[]", total="vec3[]")  # control-point sums (centroid)
+wp.overload(sum_kernel, {"values": wp.array(dtype=wp.float64), "total": wp.array(dtype=wp.float64)})
+wp.overload(sum_kernel, {"values": wp.array(dtype=wp.vec3d), "total": wp.array(dtype=wp.vec3d)})

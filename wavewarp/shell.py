@@ -14,7 +14,6 @@ host round-trips, for steppers; the NumPy methods are the public API.
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import warp as wp
@@ -26,6 +25,7 @@ from .kernels.shell import (
     gather_slots_kernel,
     koiter_energy_kernel,
     koiter_forces_kernel,
+    negate_kernel,
     sum_kernel,
     volume_centroid_forces_kernel,
     volume_energy_kernel,
@@ -233,7 +233,7 @@ class Shell:
         with tape:
             self.energy_device(xg, energy)
         tape.backward(loss=energy)
-        wp.launch(_negate, dim=len(forces), inputs=[xg.grad], outputs=[forces], device=self.device)
+        wp.launch(negate_kernel, dim=len(forces), inputs=[xg.grad], outputs=[forces], device=self.device)
         tape.zero()
 
     # ---------------------------------------------------------------- NumPy API
@@ -288,12 +288,6 @@ class Shell:
         tol = _positive("tol", tol)
         xw = self._set(x0, c)
         return relax(self, xw, tol, int(max_iterations), callback)
-
-
-@wp.kernel
-def _negate(a: wp.array(dtype=Any), out: wp.array(dtype=Any)):
-    i = wp.tid()
-    out[i] = -a[i]
 
 
 def _vertex_slots(host, n_vertices: int):
