@@ -13,10 +13,13 @@ except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+source"
 
 from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
+from .laplace import LaplaceBeltrami  # noqa: E402
 from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
 from .shell import RelaxationError, Shell  # noqa: E402
+from .waves import BlowUpError, FitzHughNagumo, Telegraph, gaussian_pulse, steady_front  # noqa: E402
 
 __all__ = [
-    "LimitSurface", "Mesh", "RelaxationError", "Shell", "cube", "icosphere", "limit_positions", "limit_surface", "load", "prism",
-    "sample_points", "save", "__version__",
+    "BlowUpError", "FitzHughNagumo", "LaplaceBeltrami", "LimitSurface", "Mesh", "RelaxationError", "Shell", "Telegraph",
+    "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism", "sample_points", "save",
+    "steady_front", "__version__",
 ]  # fmt: skip

@@ -1,0 +1,160 @@
+"""Time-step kernels of the chemical waves (SPEC §5): one per physical term, per vertex.
+
+Telegraph `c_tt + α c_t = γ² Δ c` (leapfrog with centred damping), FitzHugh–Nagumo
+`c_t = γ² Δ c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (explicit Euler, and IMEX Euler whose
+implicit diffusion is solved by the Jacobi-preconditioned conjugate gradients below).
+Here `acceleration` is the diffusion term's `M̃⁻¹ K c` (wavewarp/waves.py builds it), so the
+kernels below see only per-vertex numbers. Reductions sum interleaved strides per thread and
+add the partial sums atomically: no tile kernels, no host round-trips, graph-capturable.
+"""
+
+from typing import Any
+
+import warp as wp
+
+from . import declare_overloads
+
+
+@wp.kernel
+def telegraph_kernel(acceleration: wp.array(dtype=Any), gamma2: Any, damping: Any, dt: Any, c: wp.array(dtype=Any), v: wp.array(dtype=Any)):
+    """v^{n+½} = [(1 - αdt/2) v^{n-½} - dt γ² M̃⁻¹Kc^n] / (1 + αdt/2);  c^{n+1} = c^n + dt v^{n+½}.
+
+    `damping` is αdt/2. Stable while dt < 2 / (γ sqrt(λ_max(M̃⁻¹K))) (docs/chemistry.md).
+    """
+    i = wp.tid()
+    one = type(dt)(1.0)
+    velocity = ((one - damping) * v[i] - dt * gamma2 * acceleration[i]) / (one + damping)
+    v[i] = velocity
+    c[i] = c[i] + dt * velocity
+
+
+@wp.func
+def fhn_reaction(c: Any, nu: Any):
+    """c (1 - c)(c - ν) (SPEC §5, evaluated on control values)."""
+    return c * (type(c)(1.0) - c) * (c - nu)
+
+
+@wp.kernel
+def fhn_explicit_kernel(
+    acceleration: wp.array(dtype=Any), gamma2: Any, nu: Any, kappa: Any, epsilon: Any, dt: Any,
+    c: wp.array(dtype=Any), w: wp.array(dtype=Any),
+):  # fmt: skip
+    """Explicit Euler: c += dt (-γ² M̃⁻¹Kc + f(c) - w);  w += dt ε (c - κ w), both from step n."""
+    i = wp.tid()
+    ci = c[i]
+    wi = w[i]
+    c[i] = ci + dt * (fhn_reaction(ci, nu) - wi - gamma2 * acceleration[i])
+    w[i] = wi + dt * epsilon * (ci - kappa * wi)
+
+
+@wp.kernel
+def fhn_imex_rhs_kernel(c: wp.array(dtype=Any), w: wp.array(dtype=Any), mass: wp.array(dtype=Any), nu: Any, dt: Any, rhs: wp.array(dtype=Any)):
+    """Right-hand side of (M + dt γ² K) c^{n+1} = M (c^n + dt (f(c^n) - w^n))."""
+    i = wp.tid()
+    ci = c[i]
+    rhs[i] = mass[i] * (ci + dt * (fhn_reaction(ci, nu) - w[i]))
+
+
+@wp.kernel
+def fhn_inhibitor_kernel(c: wp.array(dtype=Any), epsilon: Any, kappa: Any, dt: Any, w: wp.array(dtype=Any)):
+    """Implicit in w: w^{n+1} = (w^n + dt ε c^{n+1}) / (1 + dt ε κ) (unconditionally stable)."""
+    i = wp.tid()
+    w[i] = (w[i] + dt * epsilon * c[i]) / (type(dt)(1.0) + dt * epsilon * kappa)
+
+
+@wp.kernel
+def runaway_kernel(values: wp.array(dtype=Any), limit: Any, flag: wp.array(dtype=wp.int32)):
+    """flag = 1 where |value| > limit or value is NaN/Inf (NaN fails every comparison)."""
+    i = wp.tid()
+    if not (wp.abs(values[i]) <= limit):
+        flag[0] = 1
+
+
+# ---------------------------------------------------------------- linear algebra on the device
+
+
+@wp.kernel
+def shifted_operator_kernel(x: wp.array(dtype=Any), Kx: wp.array(dtype=Any), mass: wp.array(dtype=Any), shift: Any, out: wp.array(dtype=Any)):
+    """out = (M + shift K) x, with Kx = K x given."""
+    i = wp.tid()
+    out[i] = mass[i] * x[i] + shift * Kx[i]
+
+
+@wp.kernel
+def inverse_diagonal_kernel(mass: wp.array(dtype=Any), K_diagonal: wp.array(dtype=Any), shift: Any, out: wp.array(dtype=Any)):
+    """Jacobi preconditioner: out = 1 / (M + shift diag K)."""
+    i = wp.tid()
+    out[i] = type(shift)(1.0) / (mass[i] + shift * K_diagonal[i])
+
+
+@wp.kernel
+def cg_start_kernel(b: wp.array(dtype=Any), Ax: wp.array(dtype=Any), inverse_diagonal: wp.array(dtype=Any),
+                    r: wp.array(dtype=Any), z: wp.array(dtype=Any), p: wp.array(dtype=Any)):  # fmt: skip
+    """r = b - A x, z = P r, p = z."""
+    i = wp.tid()
+    ri = b[i] - Ax[i]
+    zi = inverse_diagonal[i] * ri
+    r[i] = ri
+    z[i] = zi
+    p[i] = zi
+
+
+@wp.kernel
+def cg_step_kernel(p: wp.array(dtype=Any), Ap: wp.array(dtype=Any), inverse_diagonal: wp.array(dtype=Any),
+                   rz: wp.array(dtype=Any), pAp: wp.array(dtype=Any),
+                   x: wp.array(dtype=Any), r: wp.array(dtype=Any), z: wp.array(dtype=Any)):  # fmt: skip
+    """x += α p, r -= α A p, z = P r with α = r·z / p·Ap."""
+    i = wp.tid()
+    alpha = rz[0] / pAp[0]
+    x[i] = x[i] + alpha * p[i]
+    ri = r[i] - alpha * Ap[i]
+    r[i] = ri
+    z[i] = inverse_diagonal[i] * ri
+
+
+@wp.kernel
+def cg_direction_kernel(z: wp.array(dtype=Any), rz: wp.array(dtype=Any), rz_new: wp.array(dtype=Any), p: wp.array(dtype=Any)):
+    """p = z + (r·z_new / r·z_old) p."""
+    i = wp.tid()
+    p[i] = z[i] + (rz_new[0] / rz[0]) * p[i]
+
+
+@wp.kernel
+def cg_condition_kernel(rz_new: wp.array(dtype=Any), rz: wp.array(dtype=Any), rz_stop: wp.array(dtype=Any),
+                        iteration: wp.array(dtype=wp.int32), max_iterations: int, condition: wp.array(dtype=wp.int32)):  # fmt: skip
+    """Go on while r·P r > tol² b·P b and iterations remain; rz ← rz_new for the next step."""
+    iteration[0] = iteration[0] + 1
+    rz[0] = rz_new[0]
+    condition[0] = wp.where(rz_new[0] > rz_stop[0] and iteration[0] < max_iterations, 1, 0)
+
+
+@wp.kernel
+def cg_stop_kernel(rz: wp.array(dtype=Any), bz: wp.array(dtype=Any), tol2: Any, rz_stop: wp.array(dtype=Any),
+                   iteration: wp.array(dtype=wp.int32), condition: wp.array(dtype=wp.int32)):  # fmt: skip
+    """Threshold tol² b·P b; the loop runs unless r·P r is already below it."""
+    rz_stop[0] = tol2 * bz[0]
+    iteration[0] = 0
+    condition[0] = wp.where(rz[0] > rz_stop[0], 1, 0)
+
+
+@wp.kernel
+def cg_failed_kernel(rz: wp.array(dtype=Any), rz_stop: wp.array(dtype=Any), flag: wp.array(dtype=wp.int32)):
+    if not (rz[0] <= rz_stop[0]):
+        flag[0] = 1
+
+
+_S = "scalar[]"
+declare_overloads(telegraph_kernel, acceleration=_S, gamma2="scalar", damping="scalar", dt="scalar", c=_S, v=_S)
+declare_overloads(fhn_explicit_kernel, acceleration=_S, gamma2="scalar", nu="scalar", kappa="scalar", epsilon="scalar",
+                  dt="scalar", c=_S, w=_S)  # fmt: skip
+declare_overloads(fhn_imex_rhs_kernel, c=_S, w=_S, mass=_S, nu="scalar", dt="scalar", rhs=_S)
+declare_overloads(fhn_inhibitor_kernel, c=_S, epsilon="scalar", kappa="scalar", dt="scalar", w=_S)
+declare_overloads(runaway_kernel, values=_S, limit="scalar")
+declare_overloads(shifted_operator_kernel, x=_S, Kx=_S, mass=_S, shift="scalar", out=_S)
+declare_overloads(inverse_diagonal_kernel, mass=_S, K_diagonal=_S, shift="scalar", out=_S)
+declare_overloads(cg_start_kernel, b=_S, Ax=_S, inverse_diagonal=_S, r=_S, z=_S, p=_S)
+declare_overloads(cg_step_kernel, p=_S, Ap=_S, inverse_diagonal=_S, rz=_S, pAp=_S, x=_S, r=_S, z=_S)
+declare_overloads(cg_direction_kernel, z=_S, rz=_S, rz_new=_S, p=_S)
+declare_overloads(cg_condition_kernel, rz_new=_S, rz=_S, rz_stop=_S)
+declare_overloads(cg_stop_kernel, rz=_S, bz=_S, tol2="scalar", rz_stop=_S)
+declare_overloads(cg_failed_kernel, rz=_S, rz_stop=_S)

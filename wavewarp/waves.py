@@ -1,0 +1,536 @@
+"""Chemical waves on a shell (SPEC §5): telegraph and FitzHugh–Nagumo steppers on Warp arrays.
+
+A stepper advances control values on the device with no host round-trip inside a step: each
+step is a fixed sequence of kernel launches (captured once as a graph, CUDA or Warp's CPU
+graphs, and replayed), the implicit solves loop on the device (`wp.capture_while`). Every
+`check_every` steps one flag is read back: NaN/Inf or a value past `blowup_limit` restores
+the last good state and raises `BlowUpError` (no NaN is ever left in the state).
+
+Stability guard: λ_max(M̃⁻¹K) comes from power iteration on the device
+(`LaplaceBeltrami.largest_eigenvalue`); a `dt` past the method's bound is refused with a
+ValueError stating the bound and a safe value, and `dt=None` picks `safety × bound`. The
+bound is re-estimated whenever the operator's surface moves (`LaplaceBeltrami.update`).
+
+Mass: `mass_corrections=0` is the lumped mass of SPEC §5; p > 0 replaces M⁻¹ by W_p, p
+Richardson steps towards the consistent Galerkin mass (more accurate waves, smaller dt;
+docs/chemistry.md).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+
+import numpy as np
+import warp as wp
+
+from .kernels import laplace as kernels_laplace
+from .kernels import waves as kernels_waves
+from .kernels.laplace import weighted_dot_kernel
+from .kernels.waves import (
+    cg_condition_kernel,
+    cg_direction_kernel,
+    cg_failed_kernel,
+    cg_start_kernel,
+    cg_step_kernel,
+    cg_stop_kernel,
+    fhn_explicit_kernel,
+    fhn_imex_rhs_kernel,
+    fhn_inhibitor_kernel,
+    inverse_diagonal_kernel,
+    runaway_kernel,
+    shifted_operator_kernel,
+    telegraph_kernel,
+)
+from .laplace import DOT_STRIDE, LaplaceBeltrami
+
+FHN_SCHEMES = ("explicit", "imex")
+
+
+class BlowUpError(RuntimeError):
+    """A run went non-finite or past `blowup_limit`; the stepper holds the last good state (`time`, `steps`)."""
+
+    def __init__(self, message: str, time: float, steps: int):
+        super().__init__(message)
+        self.time = time
+        self.steps = steps
+
+
+def _positive(name: str, value) -> float:
+    value = float(value)
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return value
+
+
+def _finite(name: str, value) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return value
+
+
+def _count(name: str, value, minimum: int) -> int:
+    if isinstance(value, bool) or int(value) != value or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+class _Stepper(ABC):
+    """Shared machinery: dt and its guard, graph capture, blow-up detection, time keeping."""
+
+    scheme = ""
+    bound_formula = ""
+
+    def __init__(self, operator, *, dt, safety, mass_corrections, check_dt, check_every, blowup_limit, capture):
+        if not isinstance(operator, LaplaceBeltrami):
+            raise ValueError(f"operator must be a wavewarp.LaplaceBeltrami, got {type(operator).__name__}")
+        self.operator = operator
+        self.device, self.scalar = operator.device, operator.scalar
+        self._real = np.float32 if self.scalar == wp.float32 else np.float64
+        self.safety = _positive("safety", safety)
+        if self.safety > 1:
+            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+        self.mass_corrections = _count("mass_corrections", mass_corrections, 0)
+        self.check_dt = bool(check_dt)
+        self.check_every = _count("check_every", check_every, 1)
+        self._requested_dt = None if dt is None else _positive("dt", dt)
+        self._blowup_limit = None if blowup_limit is None else _positive("blowup_limit", blowup_limit)
+        self.capture = bool(capture)
+        self.dt = None
+        self.time = 0.0
+        self.steps = 0
+        self.largest_eigenvalue = None
+        self._geometry_version = None
+        self._graphs = {}
+        self._backups = None
+        with wp.ScopedDevice(self.device):
+            self._flag = wp.zeros(1, dtype=wp.int32)
+            self._stiffness_c = wp.empty(operator.n_vertices, dtype=self.scalar)
+            self._acceleration = wp.empty(operator.n_vertices, dtype=self.scalar)
+
+    # ---------------------------------------------------------------- subclass interface
+    @abstractmethod
+    def _bound(self, eigenvalue: float) -> float:
+        """The stability bound on dt for λ_max(M̃⁻¹K) = eigenvalue."""
+
+    @abstractmethod
+    def _step(self) -> None:
+        """Launch one time step (no host round-trip: it is captured as a graph)."""
+
+    @abstractmethod
+    def _state(self) -> list:
+        """Arrays saved before each chunk of steps and restored on blow-up."""
+
+    @abstractmethod
+    def _watched(self) -> list:
+        """Arrays checked for NaN/Inf and runaway values."""
+
+    def _geometry_changed(self) -> None:
+        """The surface moved and the bound and dt were refreshed (FHN IMEX rebuilds its preconditioner)."""
+
+    # ---------------------------------------------------------------- stability guard
+    @property
+    def stable_dt(self) -> float:
+        """The method's stability bound at the current surface (see `bound_formula`)."""
+        self._refresh()
+        return self._stable_dt
+
+    def _refresh(self) -> None:
+        if self._geometry_version == self.operator.version:
+            return
+        self.largest_eigenvalue = self.operator.largest_eigenvalue(self.mass_corrections)
+        self._stable_dt = self._bound(self.largest_eigenvalue)
+        if self._requested_dt is None:
+            dt = self.safety * self._stable_dt
+        else:
+            dt = self._requested_dt
+            if self.check_dt and dt > self._stable_dt:
+                raise ValueError(
+                    f"dt = {dt:.6g} exceeds the stability bound {self._stable_dt:.6g} of the {self.scheme} "
+                    f"({self.bound_formula}, λ_max(M⁻¹K) = {self.largest_eigenvalue:.6g} by power iteration): "
+                    f"use dt <= {self._stable_dt:.6g}, e.g. dt = {self.safety * self._stable_dt:.6g} "
+                    f"(safety {self.safety}), or dt=None to choose it automatically"
+                )
+        if dt != self.dt:
+            self.dt = dt
+            self._graphs.clear()
+        self._geometry_version = self.operator.version
+        self._geometry_changed()
+
+    # ---------------------------------------------------------------- stepping
+    def _diffusion_acceleration(self, c: wp.array) -> None:
+        """self._acceleration = M̃⁻¹ K c (W_p K c with p = mass_corrections)."""
+        self.operator.apply_device(c, self._stiffness_c)
+        self.operator.inverse_mass_device(self._stiffness_c, self._acceleration, self.mass_corrections)
+
+    def _run(self, steps: int) -> None:
+        if not self.capture:
+            for _ in range(steps):
+                self._step()
+            return
+        graph = self._graphs.get(steps)
+        if graph is None:
+            for module in (kernels_laplace, kernels_waves):  # all that a step launches
+                wp.load_module(module, device=self.device)
+            with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
+                for _ in range(steps):
+                    self._step()
+            graph = self._graphs[steps] = capture.graph
+        wp.capture_launch(graph)
+
+    def _check_chunk(self) -> str | None:
+        """Launch the runaway checks into self._flag; return a message for other failures."""
+        for values in self._watched():
+            wp.launch(runaway_kernel, dim=len(values), inputs=[values, self.scalar(self.blowup_limit)],
+                      outputs=[self._flag], device=self.device)  # fmt: skip
+        return None
+
+    def advance(self, steps: int = 1):
+        """Advance `steps` time steps on the device; returns self.
+
+        Raises BlowUpError (state restored to the last good check) on NaN/Inf or values past
+        `blowup_limit`, and ValueError when the surface moved and a fixed dt now exceeds the bound.
+        """
+        steps = _count("steps", steps, 0)
+        self._refresh()
+        if self._backups is None:
+            self._backups = [wp.empty_like(a) for a in self._state()]
+        backups = self._backups
+        done = 0
+        while done < steps:
+            chunk = min(self.check_every, steps - done)
+            for backup, a in zip(backups, self._state()):
+                wp.copy(backup, a)
+            self._run(chunk)
+            self._flag.zero_()
+            failure = self._check_chunk()
+            if self._flag.numpy()[0]:
+                for backup, a in zip(backups, self._state()):
+                    wp.copy(a, backup)
+                failure = failure or "NaN/Inf or a runaway value"
+                raise BlowUpError(
+                    f"{self.scheme} blew up between t = {self.time:.6g} and t = {self.time + chunk * self.dt:.6g} "
+                    f"({failure}; |value| limit {self.blowup_limit:.3g}) with dt = {self.dt:.6g} "
+                    f"(stability bound {self._stable_dt:.6g}); the state is restored to t = {self.time:.6g}. "
+                    "Reduce dt or check the initial data",
+                    self.time,
+                    self.steps,
+                )
+            done += chunk
+            self.steps += chunk
+            self.time += chunk * self.dt
+        return self
+
+    def run_until(self, time: float):
+        """Advance by whole steps to the first step at or after `time`; returns self."""
+        time = _finite("time", time)
+        self._refresh()
+        return self.advance(max(0, math.ceil((time - self.time) / self.dt - 1e-9)))
+
+    def _initial(self, values, name: str) -> np.ndarray:
+        return self.operator.checked_values(values, name)
+
+    def _device_array(self, values: np.ndarray) -> wp.array:
+        return wp.array(values.astype(self._real), dtype=self.scalar, device=self.device)
+
+    def concentration(self) -> np.ndarray:
+        """(V,) control values c at the current time."""
+        return self.c.numpy().astype(np.float64)
+
+    def total(self) -> float:
+        """C = ∫ c dω = Σ M_I c_I (lumped and consistent mass agree on it)."""
+        return float(self.operator.mass() @ self.concentration())
+
+
+class Telegraph(_Stepper):
+    """`c_tt + α c_t = γ² Δ_LB c` by leapfrog with centred damping (SPEC §5).
+
+    Weak form `M c_tt + α M c_t + γ² K c = 0` with state (c^n, v^{n-½}):
+
+        v^{n+½} = [(1 - αdt/2) v^{n-½} - dt γ² M̃⁻¹K c^n] / (1 + αdt/2),   c^{n+1} = c^n + dt v^{n+½}
+
+    stable while dt < 2 / (γ sqrt(λ_max(M̃⁻¹K))) for every α ≥ 0. `c0`, `v0` (V,) are control
+    values (see `gaussian_pulse`, `steady_front`); v^{½} = v0 + dt/2 (c_tt at t = 0).
+    """
+
+    scheme = "telegraph leapfrog"
+    bound_formula = "dt < 2 / (γ sqrt(λ_max))"
+
+    def __init__(self, operator, gamma, alpha=0.001, *, c0, v0=None, dt=None, safety=0.9, mass_corrections=0,
+                 check_dt=True, check_every=100, blowup_limit=None, capture=True):  # fmt: skip
+        super().__init__(operator, dt=dt, safety=safety, mass_corrections=mass_corrections, check_dt=check_dt,
+                         check_every=check_every, blowup_limit=blowup_limit, capture=capture)  # fmt: skip
+        self.gamma = _positive("gamma", gamma)
+        self.alpha = _finite("alpha", alpha)
+        if self.alpha < 0:
+            raise ValueError(f"alpha must be >= 0 (a dissipation rate), got {alpha!r}")
+        c0 = self._initial(c0, "c0")
+        v0 = np.zeros_like(c0) if v0 is None else self._initial(v0, "v0")
+        if self._blowup_limit is None:
+            crossing_time = math.sqrt(operator.area) / self.gamma
+            self._blowup_limit = 1e6 * max(1.0, np.max(np.abs(c0)), np.max(np.abs(v0)) * crossing_time)
+        self.blowup_limit = self._blowup_limit
+        self.c = self._device_array(c0)
+        self._refresh()
+        self._diffusion_acceleration(self.c)
+        a0 = -(self.gamma**2) * self._acceleration.numpy().astype(np.float64) - self.alpha * v0
+        half_damping = 0.5 * self.alpha * self.dt
+        v_half = v0 + 0.5 * self.dt * a0
+        self.v = self._device_array(((1 + half_damping) * v_half + self.dt * self.gamma**2 *
+                                     self._acceleration.numpy().astype(np.float64)) / (1 - half_damping))  # fmt: skip
+
+    def _bound(self, eigenvalue: float) -> float:
+        return 2.0 / (self.gamma * math.sqrt(eigenvalue))
+
+    def _step(self) -> None:
+        self._diffusion_acceleration(self.c)
+        s = self.scalar
+        wp.launch(telegraph_kernel, dim=len(self.c),
+                  inputs=[self._acceleration, s(self.gamma**2), s(0.5 * self.alpha * self.dt), s(self.dt)],
+                  outputs=[self.c, self.v], device=self.device)  # fmt: skip
+
+    def _state(self) -> list:
+        return [self.c, self.v]
+
+    def _watched(self) -> list:
+        return [self.c]
+
+    def velocity(self) -> np.ndarray:
+        """(V,) the leapfrog velocity v^{n-½} = (c^n - c^{n-1}) / dt (control values)."""
+        return self.v.numpy().astype(np.float64)
+
+
+def fhn_reaction_lipschitz(nu: float) -> float:
+    """L_f = max over c in [0, 1] of |f'(c)|, f = c(1-c)(c-ν): f' = -3c² + 2(1+ν)c - ν."""
+    candidates = [0.0, 1.0] + ([(1 + nu) / 3] if 0 <= (1 + nu) / 3 <= 1 else [])
+    return max(abs(-3 * c * c + 2 * (1 + nu) * c - nu) for c in candidates)
+
+
+class FitzHughNagumo(_Stepper):
+    """`c_t = γ² Δ_LB c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (SPEC §5; reaction on control values).
+
+    scheme="explicit": Euler, stable while dt < 2 / (γ² λ_max(M̃⁻¹K) + L_f), L_f the largest
+    |f'| on [0, 1] (1 - ν for the SPEC's ν). scheme="imex": (M + dt γ² K) c^{n+1} =
+    M (c^n + dt (f(c^n) - w^n)) by Jacobi-preconditioned CG on the device (relative tolerance
+    `tol`), then w^{n+1} = (w^n + dt ε c^{n+1}) / (1 + dt ε κ): no diffusive limit, stable while
+    dt < 2 / L_f (lumped mass only). Defaults are the SPEC's ν, κ, ε, γ; `w0` defaults to 0.
+    """
+
+    def __init__(self, operator, gamma=0.2, nu=-0.01, kappa=1e-4, epsilon=0.005, *, c0, w0=None, dt=None,
+                 scheme="explicit", safety=0.9, mass_corrections=0, tol=None, max_cg_iterations=500,
+                 check_dt=True, check_every=100, blowup_limit=None, capture=True):  # fmt: skip
+        if scheme not in FHN_SCHEMES:
+            raise ValueError(f"scheme must be one of {', '.join(FHN_SCHEMES)}, got {scheme!r}")
+        if scheme == "imex" and mass_corrections:
+            raise ValueError("scheme='imex' solves with the lumped mass: mass_corrections must be 0")
+        self.scheme = f"FitzHugh–Nagumo {scheme} Euler"
+        self.bound_formula = "dt < 2 / (γ² λ_max + L_f)" if scheme == "explicit" else "dt < 2 / L_f"
+        self.implicit = scheme == "imex"
+        if self.implicit and capture and operator.device.is_cuda and not wp.is_conditional_graph_supported():
+            capture = False  # the CG loop needs conditional graph nodes (CUDA 12.4+) to be captured
+        super().__init__(operator, dt=dt, safety=safety, mass_corrections=mass_corrections, check_dt=check_dt,
+                         check_every=check_every, blowup_limit=blowup_limit, capture=capture)  # fmt: skip
+        self.gamma = _positive("gamma", gamma)
+        self.nu, self.kappa = _finite("nu", nu), _finite("kappa", kappa)
+        self.epsilon = _finite("epsilon", epsilon)
+        if self.epsilon < 0 or self.kappa < 0:
+            raise ValueError(f"epsilon and kappa must be >= 0, got epsilon={epsilon!r}, kappa={kappa!r}")
+        self.reaction_lipschitz = fhn_reaction_lipschitz(self.nu)
+        c0 = self._initial(c0, "c0")
+        w0 = np.zeros_like(c0) if w0 is None else self._initial(w0, "w0")
+        if self._blowup_limit is None:
+            self._blowup_limit = 1e6 * max(1.0, np.max(np.abs(c0)), np.max(np.abs(w0)))
+        self.blowup_limit = self._blowup_limit
+        self.c, self.w = self._device_array(c0), self._device_array(w0)
+        if self.implicit:
+            if tol is None:
+                tol = 1e-5 if self.scalar == wp.float32 else 1e-10
+            self._solver = _ShiftedMassSolver(operator, _positive("tol", tol), _count("max_cg_iterations", max_cg_iterations, 1))
+            self._rhs = wp.empty_like(self.c)
+        self._refresh()
+
+    def _bound(self, eigenvalue: float) -> float:
+        if self.implicit:
+            return 2.0 / self.reaction_lipschitz
+        return 2.0 / (self.gamma**2 * eigenvalue + self.reaction_lipschitz)
+
+    def _geometry_changed(self) -> None:
+        if self.implicit:
+            self._solver.prepare(self.dt * self.gamma**2)
+
+    def _step(self) -> None:
+        s = self.scalar
+        if self.implicit:
+            wp.launch(fhn_imex_rhs_kernel, dim=len(self.c),
+                      inputs=[self.c, self.w, self.operator.mass_device, s(self.nu), s(self.dt)], outputs=[self._rhs],
+                      device=self.device)  # fmt: skip
+            self._solver.solve(self._rhs, self.c)
+            wp.launch(fhn_inhibitor_kernel, dim=len(self.c), inputs=[self.c, s(self.epsilon), s(self.kappa), s(self.dt)],
+                      outputs=[self.w], device=self.device)  # fmt: skip
+            return
+        self._diffusion_acceleration(self.c)
+        wp.launch(fhn_explicit_kernel, dim=len(self.c),
+                  inputs=[self._acceleration, s(self.gamma**2), s(self.nu), s(self.kappa), s(self.epsilon), s(self.dt)],
+                  outputs=[self.c, self.w], device=self.device)  # fmt: skip
+
+    def _run(self, steps: int) -> None:
+        if self.implicit:
+            self._solver.failed.zero_()
+        super()._run(steps)
+
+    def _check_chunk(self) -> str | None:
+        super()._check_chunk()
+        if self.implicit and self._solver.failed.numpy()[0]:
+            self._flag.fill_(1)
+            return (f"the CG solve of (M + dt γ² K) c = b missed its tolerance {self._solver.tol:g} within "
+                    f"{self._solver.max_iterations} iterations; raise max_cg_iterations")  # fmt: skip
+        return None
+
+    def _state(self) -> list:
+        return [self.c, self.w]
+
+    def _watched(self) -> list:
+        return [self.c, self.w]
+
+    def inhibitor(self) -> np.ndarray:
+        """(V,) the inhibitor w (control values)."""
+        return self.w.numpy().astype(np.float64)
+
+
+class _ShiftedMassSolver:
+    """(M + s K) x = b on the device: Jacobi-preconditioned conjugate gradients.
+
+    The loop runs under `wp.capture_while` (device-side exit inside captured graphs) and stops
+    when r·P r ≤ tol² b·P b or after `max_iterations`; a miss sets `failed`. Plain kernels with
+    strided reductions: Warp's tiled CG reductions cost ~5 ms per dot product on the CPU
+    (Warp 1.19, measured), several stiffness actions.
+    """
+
+    def __init__(self, operator: LaplaceBeltrami, tol: float, max_iterations: int):
+        self.operator, self.tol, self.max_iterations = operator, tol, max_iterations
+        n, scalar = operator.n_vertices, operator.scalar
+        with wp.ScopedDevice(operator.device):
+            self.r, self.z, self.p, self.Ap, self.Kp = (wp.empty(n, dtype=scalar) for _ in range(5))
+            self.K_diagonal, self.inverse_diagonal = wp.empty(n, dtype=scalar), wp.empty(n, dtype=scalar)
+            self.sums = wp.zeros(5, dtype=scalar)  # r·z, new r·z, p·Ap, b·P b, stop threshold
+            self.iteration, self.condition = wp.zeros(1, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
+            self.failed = wp.zeros(1, dtype=wp.int32)
+        self.rz, self.rz_new, self.pAp, self.bz, self.rz_stop = (self.sums[i : i + 1] for i in range(5))
+        self.shift = None
+        self._x = None
+
+    def prepare(self, shift: float) -> None:
+        """Set s and the Jacobi preconditioner 1 / (M + s diag K) for the current surface."""
+        op = self.operator
+        self.shift = op.scalar(shift)
+        op.diagonal_device(self.K_diagonal)
+        wp.launch(inverse_diagonal_kernel, dim=op.n_vertices, inputs=[op.mass_device, self.K_diagonal, self.shift],
+                  outputs=[self.inverse_diagonal], device=op.device)  # fmt: skip
+
+    def _apply(self, x: wp.array, out: wp.array) -> None:
+        op = self.operator
+        op.apply_device(x, self.Kp)
+        wp.launch(shifted_operator_kernel, dim=op.n_vertices, inputs=[x, self.Kp, op.mass_device, self.shift],
+                  outputs=[out], device=op.device)  # fmt: skip
+
+    def solve(self, b: wp.array, x: wp.array) -> None:
+        """x ← (M + s K)⁻¹ b, starting from x."""
+        op, n = self.operator, self.operator.n_vertices
+        self._x = x
+        self._apply(x, self.Ap)
+        wp.launch(cg_start_kernel, dim=n, inputs=[b, self.Ap, self.inverse_diagonal], outputs=[self.r, self.z, self.p],
+                  device=op.device)  # fmt: skip
+        op.dot_device(self.r, self.z, self.rz)
+        self.bz.zero_()
+        stride = min(n, DOT_STRIDE)
+        wp.launch(weighted_dot_kernel, dim=stride, inputs=[b, b, self.inverse_diagonal, stride], outputs=[self.bz],
+                  device=op.device)  # fmt: skip
+        wp.launch(cg_stop_kernel, dim=1, inputs=[self.rz, self.bz, op.scalar(self.tol**2)],
+                  outputs=[self.rz_stop, self.iteration, self.condition], device=op.device)  # fmt: skip
+        wp.capture_while(self.condition, self._iterate)
+        wp.launch(cg_failed_kernel, dim=1, inputs=[self.rz, self.rz_stop], outputs=[self.failed], device=op.device)
+
+    def _iterate(self) -> None:
+        op, n = self.operator, self.operator.n_vertices
+        self._apply(self.p, self.Ap)
+        op.dot_device(self.p, self.Ap, self.pAp)
+        wp.launch(cg_step_kernel, dim=n, inputs=[self.p, self.Ap, self.inverse_diagonal, self.rz, self.pAp],
+                  outputs=[self._x, self.r, self.z], device=op.device)  # fmt: skip
+        op.dot_device(self.r, self.z, self.rz_new)
+        wp.launch(cg_direction_kernel, dim=n, inputs=[self.z, self.rz, self.rz_new], outputs=[self.p], device=op.device)
+        wp.launch(cg_condition_kernel, dim=1, inputs=[self.rz_new, self.rz, self.rz_stop, self.iteration, self.max_iterations],
+                  outputs=[self.condition], device=op.device)  # fmt: skip
+
+
+# ---------------------------------------------------------------- initial conditions (SPEC §5)
+
+
+def _origin_point(operator: LaplaceBeltrami, origin) -> np.ndarray:
+    if isinstance(origin, (int, np.integer)) and not isinstance(origin, bool):
+        if not 0 <= origin < operator.n_vertices:
+            raise ValueError(f"origin vertex must lie in [0, {operator.n_vertices}), got {origin}")
+        return operator.points()[int(origin)]
+    point = np.asarray(origin, dtype=np.float64)
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ValueError(f"origin must be a vertex index or a finite point (3,), got {origin!r}")
+    return point
+
+
+def nodal_normals(operator: LaplaceBeltrami) -> np.ndarray:
+    """(V, 3) unit normals at `points()`: area-weighted normals of the polyhedron they span."""
+    p, tri = operator.points(), operator.mesh.triangles
+    face = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+    normal = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(normal, tri[:, k], face)
+    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
+
+
+def gaussian_pulse(operator: LaplaceBeltrami, origin, sigma, *, gamma, amplitude=1.0, radius=None, distance="chord"):
+    """Outgoing Gaussian pulse (SPEC §5): control values (c0, v0) of
+
+        c = C0 exp(-(s/R)² / (2σ²)),   c_t = -γ ∂c/∂s = γ C0 s / (R² σ²) exp(-(s/R)² / (2σ²)) ≥ 0
+
+    so the total concentration rises. s is the distance from `origin` (a vertex index or a
+    point): distance="chord" the straight-line distance (adequate for a narrow pulse),
+    "arc" the great-circle distance 2R asin(chord / 2R) on a sphere of radius R. R is `radius`
+    (default: the radius of the sphere with the surface's area); σ is dimensionless (the
+    paper's oocytes: σ² = 2/R² in its units). Values at `points()`, interpolated.
+    """
+    sigma, gamma, amplitude = _positive("sigma", sigma), _positive("gamma", gamma), _finite("amplitude", amplitude)
+    if distance not in ("chord", "arc"):
+        raise ValueError(f"distance must be 'chord' or 'arc', got {distance!r}")
+    R = math.sqrt(operator.area / (4 * math.pi)) if radius is None else _positive("radius", radius)
+    chord = np.linalg.norm(operator.points() - _origin_point(operator, origin), axis=1)
+    s = chord if distance == "chord" else 2 * R * np.arcsin(np.minimum(1.0, chord / (2 * R)))
+    c = amplitude * np.exp(-((s / R) ** 2) / (2 * sigma**2))
+    v = gamma * s / (R**2 * sigma**2) * c
+    return operator.control_values(c), operator.control_values(v)
+
+
+def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=None):
+    """The buckling-mode runs' steady front (SPEC §5, supplement Fig. S1b): control values (c0, v0).
+
+        c = [1 + e^{-δk}] / [1 + e^{k(|z| - δ)}]        (c = 1 at the origin, the front at |z| = δ)
+        c_t = -γ (dc/d|z|) |∇_Γ |z||,  |∇_Γ z| = sqrt(1 - (n·ê)²)      (outgoing at speed γ)
+
+    z = (p - x)·ê is the height below the origin p along `axis` ê (default: the outward normal
+    at the origin, so z ≥ 0 on a sphere); k (1/length) sets the front's steepness, δ (length)
+    its height. n are `nodal_normals`. Values at `points()`, interpolated.
+    """
+    k, delta, gamma = _positive("k", k), _positive("delta", delta), _positive("gamma", gamma)
+    p = _origin_point(operator, origin)
+    normals = nodal_normals(operator)
+    if axis is None:
+        axis = normals[np.argmin(np.linalg.norm(operator.points() - p, axis=1))]
+    axis = np.asarray(axis, dtype=np.float64)
+    if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) == 0:
+        raise ValueError(f"axis must be a finite non-zero vector (3,), got {axis!r}")
+    axis = axis / np.linalg.norm(axis)
+    height = np.abs((p - operator.points()) @ axis)
+    e = np.exp(np.minimum(k * (height - delta), 700.0))
+    c = (1 + math.exp(-delta * k)) / (1 + e)
+    dc_dheight = -(1 + math.exp(-delta * k)) * k * e / (1 + e) ** 2
+    slope = np.sqrt(np.maximum(0.0, 1 - (normals @ axis) ** 2))
+    return operator.control_values(c), operator.control_values(-gamma * dc_dheight * slope)
