@@ -1,0 +1,58 @@
+"""Quasi-static coupling: a uniform concentration drives the sphere to the closed-form radius (SPEC §8)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from wavewarp.coupled import QuasiStatic
+from wavewarp.geometry import limit_positions
+from wavewarp.laplace import LaplaceBeltrami
+from wavewarp.mesh import icosphere
+from wavewarp.shell import Shell
+from wavewarp.waves import Telegraph
+
+F64 = dict(device="cpu", dtype="float64")
+
+
+def closed_form_stretch(AC, AI, c, h_over_R):
+    """Real root near 1 of λ³ - (s - ε) λ - ε k = 0 (no volume term), s = e^{-AC c}, k = 1 - AI c, ε = h²/(6R²)."""
+    s, k, eps = math.exp(-AC * c), 1 - AI * c, h_over_R**2 / 6
+    roots = np.roots([1.0, 0.0, -(s - eps), -eps * k])
+    real = roots[np.abs(roots.imag) < 1e-12].real
+    return float(real[np.argmin(np.abs(real - 1))])
+
+
+@pytest.mark.parametrize("sensitive", [True, False])
+def test_uniform_concentration_reaches_the_closed_form_radius_and_moves_the_wave(sensitive):
+    R, h, AC, AI, c = 1.0, 0.05, 0.3, 0.5, 1.0
+    mesh = icosphere(R, 3)
+    shell = Shell(mesh, thickness=h, young=1.0, AC=AC, AI=AI, **F64)
+    op = LaplaceBeltrami(mesh, **F64)
+    wave = Telegraph(op, 1.0, c0=np.full(mesh.n_vertices, c))  # K·1 = 0: c stays uniform
+    bound = wave.stable_dt
+    run = QuasiStatic(shell, wave, sensitive=sensitive, chemistry_steps=5)
+    run.step()
+    np.testing.assert_allclose(wave.concentration(), c, atol=1e-12)
+    stretch = closed_form_stretch(AC, AI, c, h / R)
+    radius = np.linalg.norm(limit_positions(mesh, run.positions(), **F64), axis=1).mean()
+    assert abs(radius / R - stretch) <= 1e-3 * abs(1 - stretch)
+    if sensitive:  # the wave now runs on the shrunken sphere: area λ² and a bound λ times smaller
+        assert op.area == pytest.approx(4 * math.pi * (stretch * R) ** 2, rel=1e-4)
+        assert wave.stable_dt == pytest.approx(stretch * bound, rel=1e-3)
+    else:
+        assert op.area == pytest.approx(4 * math.pi * R**2, rel=1e-4)
+        assert wave.stable_dt == bound
+
+
+def test_mismatched_parts_are_refused():
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, thickness=0.05, young=1.0, **F64)
+    wave32 = Telegraph(LaplaceBeltrami(mesh, device="cpu", dtype="float32"), 1.0, c0=np.zeros(mesh.n_vertices))
+    with pytest.raises(ValueError, match="must share device and dtype"):
+        QuasiStatic(shell, wave32)
+    other = Telegraph(LaplaceBeltrami(icosphere(1.0, 1), **F64), 1.0, c0=np.zeros(42))
+    with pytest.raises(ValueError, match="must share one mesh"):
+        QuasiStatic(shell, other)
+    with pytest.raises(ValueError, match="wave must be"):
+        QuasiStatic(shell, "telegraph")

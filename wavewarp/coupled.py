@@ -1,0 +1,75 @@
+"""The quasi-static coupled stepper (SPEC §1, §3, §5): chemistry drives the shell, the shell steers the wave.
+
+One `step()`:
+1. the wave advances `chemistry_steps` steps on the device (its own stability guard);
+2. the shell's active reference ā, b̄ follows the new control concentrations (device to device);
+3. `relax` finds the new quasi-static equilibrium, warm-started from the last one;
+4. deformation-sensitive runs move the wave's operator to the new surface (`update`), which
+   makes the wave re-check its time step; the insensitive twin keeps the rest surface.
+
+State (positions, the wave's c and its velocity or inhibitor), model (Shell, LaplaceBeltrami)
+and stepper stay apart: `QuasiStatic` only sequences them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from .laplace import LaplaceBeltrami
+from .relax import relax
+from .shell import Shell
+from .waves import _count, _Stepper
+
+
+class QuasiStatic:
+    """Couple `wave` (a Telegraph or FitzHughNagumo on `wave.operator`) to `shell`.
+
+    `sensitive=True`: the wave runs on the current (deformed) surface; False: on the rest
+    surface (the deformation-insensitive twin). `tol`: the relaxation tolerance (Shell.relax).
+    """
+
+    def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
+                 x0=None):  # fmt: skip
+        if not isinstance(shell, Shell):
+            raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
+        if not isinstance(wave, _Stepper):
+            raise ValueError(f"wave must be a Telegraph or FitzHughNagumo stepper, got {type(wave).__name__}")
+        op: LaplaceBeltrami = wave.operator
+        if op.mesh is not shell.mesh and not np.array_equal(op.mesh.triangles, shell.mesh.triangles):
+            raise ValueError("the shell and the wave's operator must share one mesh")
+        if op.device != shell.device or op.scalar != shell.scalar:
+            raise ValueError(f"the shell ({shell.device}, {shell.scalar.__name__}) and the wave ({op.device}, "
+                             f"{op.scalar.__name__}) must share device and dtype")  # fmt: skip
+        self.shell, self.wave, self.operator = shell, wave, op
+        self.sensitive = bool(sensitive)
+        self.chemistry_steps = _count("chemistry_steps", chemistry_steps, 1)
+        if tol is None:
+            tol = 1e-5 if shell.scalar == wp.float32 else 1e-9
+        self.tol = float(tol)
+        x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
+        self._x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
+        self.relax_iterations = []
+        self._equilibrate()
+
+    @property
+    def time(self) -> float:
+        return self.wave.time
+
+    def positions(self) -> np.ndarray:
+        """(V, 3) control positions of the current equilibrium."""
+        return self._x.numpy().astype(np.float64)
+
+    def _equilibrate(self) -> None:
+        self.shell.update_reference(self.wave.c)
+        x = relax(self.shell, self._x, self.tol, 20000)
+        self.relax_iterations.append(len(self.shell.relax_history) - 1)
+        self._x.assign(x.astype(self.shell._real))
+        if self.sensitive:
+            self.operator.update(self._x)
+
+    def step(self):
+        """Advance the wave `chemistry_steps` steps, then relax the shell to the new reference; returns self."""
+        self.wave.advance(self.chemistry_steps)
+        self._equilibrate()
+        return self
