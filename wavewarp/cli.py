@@ -1,10 +1,12 @@
-"""Command line: `wavewarp --version`, `wavewarp list`, `wavewarp render` (SPEC §9)."""
+"""Command line: `wavewarp --version`, `wavewarp list`, `wavewarp run`, `wavewarp render` (SPEC §9)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import os
 import pkgutil
 import sys
 import time
@@ -33,6 +35,123 @@ def _list(args) -> int:
     for name, description in scenes.items():
         print(f"{name:20s} {description}")
     return 0
+
+
+class _Progress:
+    """A one-line progress bar on a terminal's stderr; silent otherwise."""
+
+    def __init__(self, label: str, total: int):
+        self.label, self.total, self.active = label, total, sys.stderr.isatty()
+        self.start = time.perf_counter()
+
+    def update(self, done: int, sim_time: float) -> None:
+        if not self.active:
+            return
+        width = 30
+        filled = int(width * done / max(self.total, 1))
+        elapsed = time.perf_counter() - self.start
+        print(f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] frame {done}/{self.total} t = {sim_time:.4g} "
+              f"({elapsed:.0f} s)", end="", file=sys.stderr, flush=True)  # fmt: skip
+
+    def close(self) -> None:
+        if self.active:
+            print(file=sys.stderr)
+
+
+def _scene_run(args) -> int:
+    import warp as wp
+
+    from .io import check_writable
+    from .mesh import load
+    from .scene import load_scene, resolve
+    from .shell import RelaxationError
+    from .trajectory import TrajectoryWriter, last_frame
+    from .usd import UsdAnimation
+    from .waves import BlowUpError
+
+    wp.config.log_level = wp.LOG_WARNING
+    start = time.perf_counter()
+    module = load_scene(args.scene)
+    if args.resume:
+        if not args.h5 or not os.path.isfile(args.h5):
+            raise ValueError("--resume needs --h5 FILE.h5, an existing trajectory of this scene")
+        if args.set:
+            raise ValueError(f"--set cannot be combined with --resume: the run continues with the parameters stored in {args.h5}")
+        import h5py
+
+        with h5py.File(args.h5, "r") as f:
+            p = json.loads(f.attrs["parameters"])
+        frames = _all_frames(args.h5)
+    else:
+        p = resolve(module.PARAMETERS, getattr(module, "QUICK", {}) if args.quick else None, args.set)
+    out = args.out or f"{module.NAME}.usda"
+    for path in [out] + ([args.h5] if args.h5 else []):
+        check_writable(path)
+
+    def report(message):
+        print(f"wavewarp run {module.NAME}: {message}", file=sys.stderr)
+
+    mesh = load(args.mesh) if args.mesh else None
+    run = module.build(p, mesh=mesh, device=args.device, seed=args.seed, report=report)
+    usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", field_range=run.field_range)
+    h5 = None
+    if args.h5:
+        h5 = TrajectoryWriter(args.h5, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
+                              scene=module.NAME, parameters=run.resolved, device=str(run.shell.device),
+                              resume=args.resume)  # fmt: skip
+    progress = _Progress(module.NAME, run.frames)
+    interrupted, failure = False, None
+    try:
+        with usd, (h5 if h5 is not None else contextlib.nullcontext()):
+            if args.resume:
+                for k in range(len(frames["time"])):
+                    usd.add_frame(frames["positions"][k], frames["concentration"][k])
+                run.restore(last_frame(args.h5))
+                done = len(frames["time"]) - 1
+            else:
+                frame = run.frame()
+                usd.add_frame(frame["positions"], frame["concentration"])
+                if h5 is not None:
+                    h5.add_frame(run.time, **frame)
+                done = 0
+            while done < run.frames:
+                try:
+                    run.advance_frame()
+                except (BlowUpError, RelaxationError) as error:  # the frames so far are complete: keep them
+                    failure = str(error)
+                    break
+                frame = run.frame()
+                usd.add_frame(frame["positions"], frame["concentration"])
+                if h5 is not None:
+                    h5.add_frame(run.time, **frame)
+                done += 1
+                progress.update(done, run.time)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        progress.close()
+    if failure:
+        print(f"wavewarp run {module.NAME}: {failure}; kept the {usd.frames} frames before it", file=sys.stderr)
+        return 1
+    outputs = [out] + ([args.h5] if args.h5 else [])
+    summary = {
+        "scene": module.NAME, "device": str(run.shell.device), "steps": run.steps, "frames": usd.frames,
+        "wall_time_s": time.perf_counter() - start, "outputs": outputs, "interrupted": interrupted,
+        "round_off_relaxations": run.coupled.round_off_stops, **run.measurements(),
+    }  # fmt: skip
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        state = "interrupted; kept" if interrupted else "wrote"
+        print(f"{state} {usd.frames} frames to {', '.join(outputs)} ({summary['wall_time_s']:.1f} s, {run.steps} wave steps)")
+    return 130 if interrupted else 0
+
+
+def _all_frames(path) -> dict:
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        return {name: f["frames"][name][...] for name in f["frames"]}
 
 
 def _build_mesh(args):
@@ -110,6 +229,18 @@ def main(argv=None) -> int:
     parser.add_argument("--version", action="version", version=f"wavewarp {__version__}")
     commands = parser.add_subparsers(dest="command", required=True)
     commands.add_parser("list", help="scene names, one line each").set_defaults(run=_list)
+    run = commands.add_parser("run", help="run a scene: USD animation (and HDF5 trajectory)")
+    run.add_argument("scene", help="a scene name (wavewarp list) or the path of a scene script")
+    run.add_argument("--out", default=None, help="USD file (default SCENE.usda)")
+    run.add_argument("--h5", default=None, help="HDF5 trajectory to write (or, with --resume, to continue)")
+    run.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
+    run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scene parameter")
+    run.add_argument("--mesh", default=None, help="any closed triangle mesh file in place of the scene's surface")
+    run.add_argument("--quick", action="store_true", help="a reduced run for smoke tests (under a minute on a CPU)")
+    run.add_argument("--seed", type=int, default=0, help="seed of the scene's random perturbations")
+    run.add_argument("--resume", action="store_true", help="continue the run stored in --h5")
+    run.add_argument("--json", action="store_true", help="print one JSON object with the results")
+    run.set_defaults(run=_scene_run)
     render = commands.add_parser("render", help="draw a mesh's Loop limit surface to USD, coloured by mean curvature")
     render.add_argument("--mesh", default="icosphere", help="icosphere, cube, prism or a mesh file (default icosphere)")
     render.add_argument("--level", type=int, default=3, help="icosphere level, or cube/prism divisions / 2 (default 3)")
@@ -121,11 +252,17 @@ def main(argv=None) -> int:
     render.add_argument("--json", action="store_true", help="print one JSON object with the results")
     render.set_defaults(run=_render)
     args = parser.parse_args(argv)
+    from .shell import RelaxationError
+    from .waves import BlowUpError
+
     try:
         return args.run(args)
     except (ValueError, OSError) as error:
         print(f"wavewarp {args.command}: {error}", file=sys.stderr)
         return 2
+    except (BlowUpError, RelaxationError) as error:  # a solver failed before the first frame
+        print(f"wavewarp {args.command}: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

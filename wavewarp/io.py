@@ -7,18 +7,25 @@ import os
 import tempfile
 
 
+def check_writable(path) -> None:
+    """Raise ValueError naming the problem if `path` could not be written (its folder is missing or read-only)."""
+    path = os.path.abspath(os.fspath(path))
+    directory = os.path.dirname(path)
+    if not os.path.isdir(directory):
+        raise ValueError(f"cannot write {path!r}: folder {directory!r} does not exist")
+    if not os.access(directory, os.W_OK):
+        raise ValueError(f"cannot write {path!r}: folder {directory!r} is not writable")
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path beside `path` (same extension); on success it replaces `path`.
 
     On any exception the temporary file is removed and `path` is left untouched.
     """
+    check_writable(path)
     path = os.path.abspath(os.fspath(path))
     directory, name = os.path.split(path)
-    if not os.path.isdir(directory):
-        raise ValueError(f"cannot write {path!r}: folder {directory!r} does not exist")
-    if not os.access(directory, os.W_OK):
-        raise ValueError(f"cannot write {path!r}: folder {directory!r} is not writable")
     stem, suffix = os.path.splitext(name)
     handle, tmp = tempfile.mkstemp(prefix=f".{stem}.", suffix=f".tmp{suffix}", dir=directory)
     os.close(handle)

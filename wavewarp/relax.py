@@ -93,7 +93,7 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None) ->
         f"{residual / tol:.3g}× the tolerance {tol:g}"
         + (" (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
            if alpha == 0.0 else "; raise max_iterations or tol"),  # fmt: skip
-        residual, x.numpy().astype(np.float64),
+        residual, x.numpy().astype(np.float64), round_off=alpha == 0.0,
     )  # fmt: skip
 
 

@@ -39,12 +39,14 @@ GRADIENTS = ("analytic", "autodiff")
 
 
 class RelaxationError(RuntimeError):
-    """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped."""
+    """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped, `.x` the positions
+    there, `.round_off` whether it stopped because no lower energy could be resolved."""
 
-    def __init__(self, message: str, residual: float, x: np.ndarray):
+    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False):
         super().__init__(message)
         self.residual = residual
         self.x = x
+        self.round_off = round_off
 
 
 def _positive(name: str, value) -> float:

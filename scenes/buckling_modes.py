@@ -1,0 +1,22 @@
+"""Buckling modes (supplement Fig. S1b, Movie 9; SPEC §5, §6): a steady tanh front; n grows with AI, falls with h/R."""
+
+from wavewarp.scene import SPHERE_PARAMETERS, Param, sphere_wave_run
+
+NAME = "buckling-modes"
+DESCRIPTION = "buckling modes: steady tanh front on a sphere, AI 7.5–13.5, h/R 0.01–0.075 (Fig. S1b)"
+PARAMETERS = {
+    **SPHERE_PARAMETERS,
+    "AC": Param(0.0, "metric coupling (SPEC §6)"),
+    "AI": Param(10.5, "curvature coupling; Fig. S1b spans 7.5–13.5"),
+    "mu_v": Param(0.0, "volume penalty μV in units of Y h / R⁴ (SPEC §6: none)", minimum=0.0),
+    "noise": Param(1e-4, "position noise / R: breaks the symmetry so the n-fold mode can form", minimum=0.0),
+    "k": Param(1.0, "front steepness k (1/length): the front is ~2/k = 2 length units wide, as the oocyte pulse",
+               positive=True),
+    "delta": Param(0.0, "front height δ below the pole (length); 0 = R/2, between pole and equator", minimum=0.0),
+}
+QUICK = {"level": 3, "frames": 4, "t_end": 4.0}
+
+
+def build(p, *, mesh=None, device=None, seed=0, report=print):
+    initial = {"kind": "front", "k": p["k"], "delta": p["delta"] or 0.5 * p["radius"]}
+    return sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, initial=initial, report=report)

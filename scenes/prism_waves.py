@@ -1,0 +1,22 @@
+"""Prism wave guide (paper Fig. 2; SPEC §6): the opposite face shows a 3- or 5-fold imprint."""
+
+import math
+
+from wavewarp.mesh import prism
+from wavewarp.scene import BOX_PARAMETERS, Param, box_wave_run
+
+NAME = "prism-waves"
+DESCRIPTION = "triangular prism wave guide, L = 20h: telegraph wave from the triangle-face centre, an edge or a vertex (Fig. 2)"
+_R = 1 / math.sqrt(3.0)  # circumradius of the unit triangle
+ORIGINS = {  # in units of L; the triangular caps lie at z = ±L/2, one corner towards +y
+    "face": (0.0, 0.0, 0.5),
+    "edge": (0.0, -0.5 * _R, 0.5),  # midpoint of the cap edge opposite the +y corner
+    "vertex": (0.0, _R, 0.5),
+}
+PARAMETERS = {**BOX_PARAMETERS, "origin": Param("face", "where the pulse starts", choices=tuple(ORIGINS))}
+QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}
+
+
+def build(p, *, mesh=None, device=None, seed=0, report=print):
+    del seed  # the box scenes are deterministic
+    return box_wave_run(NAME, p, prism, ORIGINS, mesh=mesh, device=device, report=report)

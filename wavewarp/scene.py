@@ -1,0 +1,264 @@
+"""Scenes (SPEC §6, §9): typed parameters that `--set` overrides, and the quasi-static wave run.
+
+A scene script (`scenes/NAME.py`) defines `NAME`, `DESCRIPTION`, `PARAMETERS` (name -> Param,
+each with its default and the reason for it), `QUICK` (overrides for `--quick`) and
+`build(p, *, mesh, device, seed)` returning a run object with `series`, `frame()`,
+`advance_frame()`, `restore(frame)` and `measurements()`. Scenes build only the terms they use.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .coupled import QuasiStatic
+from .laplace import LaplaceBeltrami
+from .mesh import Mesh
+from .shell import Shell
+from .waves import Telegraph, gaussian_pulse, steady_front
+
+
+class SceneError(ValueError):
+    """A scene name, parameter or value that cannot be used; the message lists what is valid."""
+
+
+@dataclass(frozen=True)
+class Param:
+    """One scene parameter: its default (which fixes its type), why, and what values are valid."""
+
+    default: object
+    help: str
+    choices: tuple = ()
+    positive: bool = False
+    minimum: float | None = None
+
+    def parse(self, name: str, text):
+        kind = type(self.default)
+        try:
+            if kind is bool:
+                value = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[str(text).lower()]
+            elif kind is int:
+                value = int(text)
+            elif kind is float:
+                value = float(text)
+                if not math.isfinite(value):
+                    raise ValueError
+            else:
+                value = str(text)
+        except (KeyError, ValueError):
+            expected = {bool: "true or false", int: "an integer", float: "a finite number"}.get(kind, "text")
+            raise SceneError(f"bad value for {name}: {text!r} (expected {expected})") from None
+        if self.choices and value not in self.choices:
+            raise SceneError(f"bad value for {name}: {value!r} (one of {', '.join(map(str, self.choices))})")
+        if self.positive and not value > 0:
+            raise SceneError(f"bad value for {name}: {value!r} (must be > 0)")
+        if self.minimum is not None and value < self.minimum:
+            raise SceneError(f"bad value for {name}: {value!r} (must be >= {self.minimum})")
+        return value
+
+
+def resolve(parameters: dict, quick: dict | None = None, overrides=()) -> dict:
+    """Defaults, then `quick`, then NAME=VALUE `overrides`; an unknown name or bad value raises SceneError."""
+    values = {name: param.default for name, param in parameters.items()}
+    values.update(quick or {})
+    for item in overrides:
+        name, sep, text = str(item).partition("=")
+        name = name.strip()
+        if not sep:
+            raise SceneError(f"--set needs NAME=VALUE, got {item!r}")
+        if name not in parameters:
+            raise SceneError(f"unknown parameter {name!r}; valid: {', '.join(sorted(parameters))}")
+        values[name] = parameters[name].parse(name, text.strip())
+    return values
+
+
+def load_scene(name_or_path: str):
+    """The scene module: a name from `wavewarp.scenes` or the path of a scene script."""
+    if name_or_path.endswith(".py") or os.sep in name_or_path:
+        if not os.path.isfile(name_or_path):
+            raise SceneError(f"scene script {name_or_path!r} does not exist")
+        spec = importlib.util.spec_from_file_location("wavewarp_user_scene", name_or_path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    else:
+        from .cli import scene_descriptions
+
+        known = scene_descriptions()
+        if name_or_path not in known:
+            raise SceneError(f"unknown scene {name_or_path!r}; valid: {', '.join(known)}")
+        module = importlib.import_module(f"wavewarp.scenes.{name_or_path.replace('-', '_')}")
+    for attribute in ("NAME", "PARAMETERS", "build"):
+        if not hasattr(module, attribute):
+            raise SceneError(f"scene {name_or_path!r} defines no {attribute}")
+    return module
+
+
+# ---------------------------------------------------------------- parameters shared by the telegraph scenes
+
+TELEGRAPH_PARAMETERS = {
+    "young": Param(1.0, "Y sets the unit of stress (quasi-static: only ratios matter)", positive=True),
+    "poisson": Param(0.33, "Poisson ratio, as in SPEC §9's Shell default"),
+    "gamma": Param(1.0, "wave speed γ; with the size it sets the time unit", positive=True),
+    "alpha": Param(0.001, "telegraph dissipation α (SPEC §5)", minimum=0.0),
+    "dt": Param(0.0, "time step; 0 = 0.4 × the rest surface's stability bound (room for the contraction "
+                "the wave drives: e^{-AC c} shrinks lengths, and the guard refuses dt past the moving bound)",
+                minimum=0.0),  # fmt: skip
+    "frames": Param(48, "frames written between t = 0 and t_end", minimum=1),
+    "sensitive": Param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)"),
+    "mass_corrections": Param(0, "0 = lumped mass (SPEC §5); 2 = more accurate wave shapes (docs/chemistry.md)",
+                              minimum=0),  # fmt: skip
+    "relax_every": Param(0, "chemistry steps per relaxation; 0 = as many as keep the wave within half a "
+                         "control edge between relaxations (quasi-static: τ_mech ≪ τ_wave)", minimum=0),  # fmt: skip
+    "relax_tol": Param(0.0, "relaxation tolerance (a residual strain, Shell.relax); 0 = the dtype's default", minimum=0.0),
+    "dtype": Param("float32", "float32 (default; checked against float64 in tests) or float64",
+                   choices=("float32", "float64")),  # fmt: skip
+}
+
+
+def parameters_with(**scene) -> dict:
+    """TELEGRAPH_PARAMETERS updated with a scene's own parameters."""
+    return {**TELEGRAPH_PARAMETERS, **scene}
+
+
+def scene_mesh(mesh: Mesh | None, build_default, report=print) -> Mesh:
+    """The scene's own mesh, or `--mesh` refined once where a triangle has two extraordinary vertices."""
+    mesh = build_default() if mesh is None else mesh
+    if mesh.needs_refinement:
+        report("the mesh has triangles with two extraordinary vertices: refined once by Loop subdivision")
+        mesh = mesh.subdivided(1)
+    return mesh
+
+
+def mean_edge(mesh: Mesh) -> float:
+    return float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
+
+
+class QuasiStaticWaveRun:
+    """A telegraph wave on a quasi-static active shell: the oocyte, wave-guide and buckling scenes.
+
+    `initial` is "gaussian" (origin, sigma) or "front" (origin, k, delta). Frames are written
+    at multiples of `steps_per_frame × dt` up to `t_end`.
+    """
+
+    def __init__(self, name: str, mesh: Mesh, p: dict, *, size: float, origin, initial: dict, t_end: float,
+                 rule: str = "3", device=None, x0=None):  # fmt: skip
+        self.name, self.mesh, self.p = name, mesh, p
+        dtype = p["dtype"]
+        self.shell = Shell(mesh, thickness=p["thickness"], young=p["young"], poisson=p["poisson"], AC=p["AC"],
+                           AI=p["AI"], volume_penalty=p["mu_v"] * p["young"] * p["thickness"] / size**4, rule=rule,
+                           device=device, dtype=dtype)  # fmt: skip
+        self.operator = LaplaceBeltrami(mesh, rule=rule, device=device, dtype=dtype)
+        if initial["kind"] == "gaussian":
+            c0, v0 = gaussian_pulse(self.operator, origin, initial["sigma"], gamma=p["gamma"], radius=size,
+                                    distance=initial.get("distance", "chord"))  # fmt: skip
+        else:
+            c0, v0 = steady_front(self.operator, origin, k=initial["k"], delta=initial["delta"], gamma=p["gamma"])
+        probe = Telegraph(self.operator, p["gamma"], p["alpha"], c0=c0, mass_corrections=p["mass_corrections"])
+        dt = p["dt"] or 0.4 * probe.stable_dt
+        self.wave = Telegraph(self.operator, p["gamma"], p["alpha"], c0=c0, v0=v0, dt=dt,
+                              mass_corrections=p["mass_corrections"])  # fmt: skip
+        relax_every = p["relax_every"] or max(1, int(0.5 * mean_edge(mesh) / (p["gamma"] * dt)))
+        self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p["frames"] / (relax_every * dt)))
+        self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
+        self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
+                                   tol=p["relax_tol"] or None, x0=x0)  # fmt: skip
+        self.resolved = {**p, "dt": dt, "relax_every": relax_every}
+        self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
+                       "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
+        self.field_range = (0.0, 1.0)
+        self.size = size
+
+    @property
+    def time(self) -> float:
+        return self.wave.time
+
+    @property
+    def steps(self) -> int:
+        return self.wave.steps
+
+    def frame(self) -> dict:
+        """The current frame: control positions, concentrations and the wave's rate c_t (control values)."""
+        return {"positions": self.coupled.positions(), "concentration": self.wave.concentration(),
+                "concentration_rate": self.wave.velocity()}  # fmt: skip
+
+    def advance_frame(self) -> None:
+        for _ in range(self.steps_per_frame // self.coupled.chemistry_steps):
+            self.coupled.step()
+
+    def restore(self, frame: dict) -> None:
+        """Continue from a saved frame (HDF5 resume): positions, c, c_t and the time."""
+        real = self.shell._real
+        self.wave.c.assign(np.asarray(frame["concentration"]).astype(real))
+        self.wave.v.assign(np.asarray(frame["concentration_rate"]).astype(real))
+        self.wave.steps = int(round(frame["time"] / self.wave.dt))
+        self.wave.time = self.wave.steps * self.wave.dt
+        self.coupled.restore(frame["positions"])
+
+    def measurements(self) -> dict:
+        x = self.coupled.positions()
+        return {"time": self.time, "volume": self.shell.volume(x),
+                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations))}  # fmt: skip
+
+
+SPHERE_PARAMETERS = parameters_with(
+    radius=Param(25.0, "R, as the walkers (SPEC §6); the pulse width below is then ~R/18", positive=True),
+    thickness=Param(1.25, "h (absolute); h/R = 0.05 at the default R (SPEC §6)", positive=True),
+    width=Param(math.sqrt(2.0), "pulse width σR in length units: the paper's σ² = 2/R² (SPEC §5)", positive=True),
+    level=Param(5, "icosphere level: 20480 triangles, ~2 control edges per pulse width", minimum=1),
+    t_end=Param(0.0, "end time; 0 = π R / γ, the wave's pole-to-pole time", minimum=0.0),
+    noise=Param(0.0, "random position perturbation / R (seeded by --seed) to break symmetry", minimum=0.0),
+)
+
+
+def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initial=None, report=print):
+    """A telegraph wave from the north pole of a quasi-static sphere (oocytes, buckling)."""
+    from .mesh import icosphere
+
+    R = p["radius"]
+    mesh = scene_mesh(mesh, lambda: icosphere(R, p["level"]), report)
+    pole = np.array([0.0, 0.0, R])
+    if initial is None:
+        initial = {"kind": "gaussian", "sigma": p["width"] / R, "distance": "arc"}
+    x0 = seeded_noise(mesh, p["noise"] * R, seed) if p["noise"] > 0 else None
+    return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or math.pi * R / p["gamma"],
+                              device=device, x0=x0)  # fmt: skip
+
+
+BOX_PARAMETERS = parameters_with(
+    edge=Param(20.0, "L: all edges of the box; L = 20 h (SPEC §6)", positive=True),
+    thickness=Param(1.0, "h (absolute); L = 20 h at the default L (SPEC §6)", positive=True),
+    width=Param(math.sqrt(2.0), "pulse width in length units, as the oocytes' (SPEC §5)", positive=True),
+    divisions=Param(16, "control squares per face edge (even): ~9 edges per L/8", minimum=2),
+    t_end=Param(0.0, "end time; 0 = 2 L / γ, past the face opposite the origin", minimum=0.0),
+    AC=Param(0.2, "metric coupling (SPEC §6)"),
+    AI=Param(0.0, "curvature coupling (SPEC §6)"),
+    mu_v=Param(0.0, "volume penalty μV in units of Y h / L⁴ (SPEC §6: none)", minimum=0.0),
+    rule=Param("3x4", "quadrature: the 3-point rule on 4 sub-triangles integrates the rounded box edges "
+               "(docs/geometry.md: rule '3' misses 3% of the Gauss-Bonnet integral on a cube)"),
+)
+
+
+def box_wave_run(name: str, p: dict, make_box, origins: dict, *, mesh=None, device=None, report=print):
+    """A telegraph wave on a quasi-static box (cube or prism) from a face centre, an edge or a vertex."""
+    L = p["edge"]
+    divisions = p["divisions"] + p["divisions"] % 2
+    mesh = scene_mesh(mesh, lambda: make_box(L, divisions), report)
+    origin = np.asarray(origins[p["origin"]], dtype=np.float64) * L
+    initial = {"kind": "gaussian", "sigma": p["width"] / L}
+    return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p["t_end"] or 2 * L / p["gamma"],
+                              rule=p["rule"], device=device)  # fmt: skip
+
+
+def seeded_noise(mesh: Mesh, amplitude: float, seed: int) -> np.ndarray:
+    """Positions perturbed by `amplitude` × a standard normal per coordinate (to break symmetry)."""
+    return mesh.vertices + amplitude * np.random.default_rng(seed).standard_normal(mesh.vertices.shape)
+
+
+def device_name(device) -> str:
+    return str(wp.get_device(device))
