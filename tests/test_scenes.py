@@ -34,7 +34,8 @@ def test_quick_run_writes_usd_and_hdf5(scene, tmp_path, capsys):
     code, out, err = run_cli(capsys, scene, "--quick", "--device", "cpu", "--out", str(usd), "--h5", str(h5), "--json")
     assert code == 0, err
     summary = json.loads(out)
-    assert summary["scene"] == scene and summary["outputs"] == [str(usd), str(h5)] and summary["steps"] > 0
+    assert summary["scene"] == scene and summary["outputs"][:2] == [str(usd), str(h5)] and summary["steps"] > 0
+    assert all(os.path.isfile(path) for path in summary["outputs"])  # the figures too
     stage = Usd.Stage.Open(str(usd))
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Shell"))
@@ -121,3 +122,27 @@ def test_mesh_file_is_refined_when_needed_and_used(tmp_path, capsys):
     assert "refined once by Loop subdivision" in err
     with h5py.File(tmp_path / "ball.h5", "r") as f:
         assert len(f["mesh/triangles"]) == 4 * coarse.n_triangles
+
+
+@pytest.mark.parametrize("stop, code", [(KeyboardInterrupt, 130), ("blow-up", 1)])
+def test_interrupt_or_solver_failure_keeps_the_frames_written(stop, code, tmp_path, capsys, monkeypatch):
+    from wavewarp.scene import QuasiStaticWaveRun
+    from wavewarp.waves import BlowUpError
+
+    original, calls = QuasiStaticWaveRun.advance_frame, []
+
+    def advance_then_stop(self):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt if stop is KeyboardInterrupt else BlowUpError("telegraph leapfrog blew up", 0.0, 0)
+        original(self)
+
+    monkeypatch.setattr(QuasiStaticWaveRun, "advance_frame", advance_then_stop)
+    usd, h5 = tmp_path / "s.usda", tmp_path / "s.h5"
+    result, out, err = run_cli(capsys, "starfish", "--quick", "--device", "cpu", "--out", str(usd), "--h5", str(h5))
+    assert result == code
+    with h5py.File(h5, "r") as f:
+        assert len(f["frames/time"]) == 2  # the initial frame and the one completed
+    assert usd.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".")]  # no temporary left
+    if stop != KeyboardInterrupt:
+        assert "blew up; kept the 2 frames before it" in err

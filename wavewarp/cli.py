@@ -8,6 +8,7 @@ import importlib
 import json
 import os
 import pkgutil
+import signal
 import sys
 import time
 
@@ -101,11 +102,13 @@ def _scene_run(args) -> int:
                               resume=args.resume)  # fmt: skip
     progress = _Progress(module.NAME, run.frames)
     interrupted, failure = False, None
+    signal.signal(signal.SIGTERM, _terminate)  # a batch system's stop keeps the frames, as Ctrl-C does
     try:
         with usd, (h5 if h5 is not None else contextlib.nullcontext()):
             if args.resume:
                 for k in range(len(frames["time"])):
                     usd.add_frame(frames["positions"][k], frames["concentration"][k])
+                    run.record(frames["time"][k], {name: frames[name][k] for name in frames}, stored=True)
                 run.restore(last_frame(args.h5))
                 done = len(frames["time"]) - 1
             else:
@@ -113,6 +116,7 @@ def _scene_run(args) -> int:
                 usd.add_frame(frame["positions"], frame["concentration"])
                 if h5 is not None:
                     h5.add_frame(run.time, **frame)
+                run.record(run.time, frame)
                 done = 0
             while done < run.frames:
                 try:
@@ -124,6 +128,7 @@ def _scene_run(args) -> int:
                 usd.add_frame(frame["positions"], frame["concentration"])
                 if h5 is not None:
                     h5.add_frame(run.time, **frame)
+                run.record(run.time, frame)
                 done += 1
                 progress.update(done, run.time)
     except KeyboardInterrupt:
@@ -134,6 +139,8 @@ def _scene_run(args) -> int:
         print(f"wavewarp run {module.NAME}: {failure}; kept the {usd.frames} frames before it", file=sys.stderr)
         return 1
     outputs = [out] + ([args.h5] if args.h5 else [])
+    if usd.frames > 1:
+        outputs += run.figures(os.path.splitext(out)[0])
     summary = {
         "scene": module.NAME, "device": str(run.shell.device), "steps": run.steps, "frames": usd.frames,
         "wall_time_s": time.perf_counter() - start, "outputs": outputs, "interrupted": interrupted,
@@ -145,6 +152,10 @@ def _scene_run(args) -> int:
         state = "interrupted; kept" if interrupted else "wrote"
         print(f"{state} {usd.frames} frames to {', '.join(outputs)} ({summary['wall_time_s']:.1f} s, {run.steps} wave steps)")
     return 130 if interrupted else 0
+
+
+def _terminate(signum, frame):
+    raise KeyboardInterrupt
 
 
 def _all_frames(path) -> dict:

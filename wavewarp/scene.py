@@ -147,7 +147,7 @@ class QuasiStaticWaveRun:
     """
 
     def __init__(self, name: str, mesh: Mesh, p: dict, *, size: float, origin, initial: dict, t_end: float,
-                 rule: str = "3", device=None, x0=None):  # fmt: skip
+                 rule: str = "3", device=None, x0=None, profile=None, measure=None, figures=None):  # fmt: skip
         self.name, self.mesh, self.p = name, mesh, p
         dtype = p["dtype"]
         self.shell = Shell(mesh, thickness=p["thickness"], young=p["young"], poisson=p["poisson"], AC=p["AC"],
@@ -173,6 +173,11 @@ class QuasiStaticWaveRun:
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
         self.field_range = (0.0, 1.0)
         self.size = size
+        self.origin = np.asarray(origin, dtype=np.float64)
+        self.arrival = ArrivalTimes(self.wave.concentration())
+        self.profiles = []  # per frame: (time, profile along the scene's chosen curve), for figures
+        self._profile, self._measure, self._figures = profile, measure, {**(figures or {}), "frame": frame_png}
+        self.snapshot = None  # (time, positions, c) of the frame nearest t_end / 3, for the rendered frame
 
     @property
     def time(self) -> float:
@@ -190,6 +195,7 @@ class QuasiStaticWaveRun:
     def advance_frame(self) -> None:
         for _ in range(self.steps_per_frame // self.coupled.chemistry_steps):
             self.coupled.step()
+            self.arrival.update(self.wave.concentration(), self.wave.time)
 
     def restore(self, frame: dict) -> None:
         """Continue from a saved frame (HDF5 resume): positions, c, c_t and the time."""
@@ -200,17 +206,40 @@ class QuasiStaticWaveRun:
         self.wave.time = self.wave.steps * self.wave.dt
         self.coupled.restore(frame["positions"])
 
+    def record(self, time: float, frame: dict, stored: bool = False) -> None:
+        """Note a written frame for the figures (and, for frames read back on resume, the arrival times)."""
+        if stored:
+            self.arrival.update(frame["concentration"], time)
+        if self._profile is not None:
+            self.profiles.append((time, self._profile(self, frame["positions"])))
+        target = self.frames * self.steps_per_frame * self.wave.dt / 3
+        if self.snapshot is None or abs(time - target) < abs(self.snapshot[0] - target):
+            self.snapshot = (time, np.array(frame["positions"]), np.array(frame["concentration"]))
+
     def measurements(self) -> dict:
         x = self.coupled.positions()
-        return {"time": self.time, "volume": self.shell.volume(x),
-                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations))}  # fmt: skip
+        out = {"time": self.time, "volume": self.shell.volume(x),
+               "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations))}  # fmt: skip
+        if self._measure is not None:
+            out.update(self._measure(self))
+        return out
+
+    def figures(self, stem: str) -> list:
+        """Write the scene's figures as STEM_NAME.png; returns their paths."""
+        paths = []
+        for name, draw in self._figures.items():
+            paths.append(f"{stem}_{name}.png")
+            draw(self, paths[-1])
+        return paths
 
 
 SPHERE_PARAMETERS = parameters_with(
-    radius=Param(25.0, "R, as the walkers (SPEC §6); the pulse width below is then ~R/18", positive=True),
-    thickness=Param(1.25, "h (absolute); h/R = 0.05 at the default R (SPEC §6)", positive=True),
+    radius=Param(10.0, "R (the paper gives none for oocytes): with the paper's pulse width below the pulse "
+                 "is R/7 wide, a narrow Gaussian that level 4 resolves (R = 25 needs level 6)", positive=True),
+    thickness=Param(0.5, "h (absolute); h/R = 0.05 at the default R (SPEC §6)", positive=True),
     width=Param(math.sqrt(2.0), "pulse width σR in length units: the paper's σ² = 2/R² (SPEC §5)", positive=True),
-    level=Param(5, "icosphere level: 20480 triangles, ~2 control edges per pulse width", minimum=1),
+    level=Param(4, "icosphere level: 5120 triangles, 2.3 control edges per pulse width at R = 10 (level 5 on a GPU: 4.6)",
+                minimum=1),
     t_end=Param(0.0, "end time; 0 = π R / γ, the wave's pole-to-pole time", minimum=0.0),
     noise=Param(0.0, "random position perturbation / R (seeded by --seed) to break symmetry", minimum=0.0),
 )
@@ -227,7 +256,8 @@ def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initi
         initial = {"kind": "gaussian", "sigma": p["width"] / R, "distance": "arc"}
     x0 = seeded_noise(mesh, p["noise"] * R, seed) if p["noise"] > 0 else None
     return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or math.pi * R / p["gamma"],
-                              device=device, x0=x0)  # fmt: skip
+                              device=device, x0=x0, profile=meridian_curvature_radius, measure=sphere_wave_measurements,
+                              figures={"kymograph": kymograph_png})  # fmt: skip
 
 
 BOX_PARAMETERS = parameters_with(
@@ -253,6 +283,127 @@ def box_wave_run(name: str, p: dict, make_box, origins: dict, *, mesh=None, devi
     initial = {"kind": "gaussian", "sigma": p["width"] / L}
     return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p["t_end"] or 2 * L / p["gamma"],
                               rule=p["rule"], device=device)  # fmt: skip
+
+
+class ArrivalTimes:
+    """Per vertex, the time at which the control concentration peaked (the pulse's passage), sampled
+    at every relaxation; `peak` holds the peak value."""
+
+    def __init__(self, c0: np.ndarray):
+        self.peak = np.asarray(c0, dtype=np.float64).copy()
+        self.time = np.zeros_like(self.peak)
+
+    def update(self, c: np.ndarray, time: float) -> None:
+        higher = c > self.peak
+        self.peak[higher] = c[higher]
+        self.time[higher] = time
+
+
+def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), rings=12) -> dict:
+    """Wave speed and rotational symmetry of a pulse from the pole (SPEC §7, Fig. 1c).
+
+    Arrival times against the rest arc length R θ on θ in `theta_range`: the speed is the slope's
+    inverse, `speed_nonlinearity` the largest deviation from the line over the time to cross the
+    range, and `arrival_spread` the largest standard deviation of the arrival times within a
+    latitude ring, over the time the wave takes to cross one ring.
+    """
+    R = run.size
+    rest = run.mesh.vertices
+    theta = np.arccos(np.clip(rest @ run.origin / (np.linalg.norm(rest, axis=1) * np.linalg.norm(run.origin)), -1, 1))
+    reached = run.arrival.time > 0
+    probe = reached & (theta > theta_range[0]) & (theta < theta_range[1])
+    if probe.sum() < 10 or run.time < R * theta_range[1] / run.p["gamma"]:
+        return {"wave_speed": None, "speed_nonlinearity": None, "arrival_spread": None}
+    s, t = R * theta[probe], run.arrival.time[probe]
+    slope, offset = np.polyfit(s, t, 1)
+    crossing = slope * (s.max() - s.min())
+    edges = np.linspace(*theta_range, rings + 1)
+    ring = np.digitize(theta[probe], edges) - 1
+    spread = max(float(np.std(t[ring == k])) for k in range(rings) if np.sum(ring == k) > 2)
+    return {"wave_speed": float(1 / slope), "speed_nonlinearity": float(np.abs(t - (slope * s + offset)).max() / crossing),
+            "arrival_spread": spread / (crossing / rings)}  # fmt: skip
+
+
+def meridian_curvature_radius(run, x, bins=90) -> np.ndarray:
+    """The local mean-curvature radius 1/H along the meridian through the origin (x > 0 half-plane
+    containing the polar axis), in `bins` bins of the rest polar angle: the kymograph's rows."""
+    from .geometry import limit_surface
+
+    surface = limit_surface(run.mesh, x, device=run.operator.device, dtype="float64")
+    rest = limit_surface(run.mesh, device=run.operator.device, dtype="float64").points
+    axis = run.origin / np.linalg.norm(run.origin)
+    side = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    width = 0.5 * mean_edge(run.mesh)
+    near = np.abs(rest @ side) < width
+    in_plane = np.cross(side, axis)
+    theta = np.arctan2(rest @ in_plane, rest @ axis) % (2 * np.pi)  # 0 at the origin, π at the antipode
+    theta = np.where(theta > np.pi, 2 * np.pi - theta, theta)
+    index = np.minimum((theta[near] / np.pi * bins).astype(int), bins - 1)
+    curvature = np.bincount(index, surface.mean_curvature[near] * surface.area[near], bins)
+    area = np.bincount(index, surface.area[near], bins)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return area / curvature  # 1/H, area-weighted H in each bin
+
+
+def kymograph_png(run, path) -> None:
+    """Fig. 1c: 1/H along the meridian (rest arc length) against time, written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_path
+
+    times = [t for t, _ in run.profiles]
+    image = np.array([profile for _, profile in run.profiles]) / run.size
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    extent = (0, math.pi * run.size, times[-1] if times else 1, times[0] if times else 0)
+    shown = ax.imshow(image, aspect="auto", extent=extent, cmap="RdBu", vmin=0.0, vmax=2.0)
+    fig.colorbar(shown, label="local mean-curvature radius 1/H, in R")
+    ax.set_xlabel("arc length from the wave's origin along a meridian (rest shell)")
+    ax.set_ylabel("time")
+    ax.set_title(f"{run.name}: curvature kymograph (paper Fig. 1c)")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+
+
+def frame_png(run, path) -> None:
+    """A rendered frame: the limit surface (control triangles at the limit points) coloured by c."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from .geometry import limit_positions
+    from .io import atomic_path
+    from .usd import colour_map
+
+    time, x, c = run.snapshot
+    points = limit_positions(run.mesh, x, device=run.operator.device, dtype="float64")
+    field = run.operator.field_values(c)
+    triangles = run.mesh.triangles
+    colours = colour_map(field[triangles].mean(axis=1), 0.0, max(float(field.max()), 1e-12))  # this frame's range
+    normals = np.cross(points[triangles[:, 1]] - points[triangles[:, 0]], points[triangles[:, 2]] - points[triangles[:, 0]])
+    light = np.clip(0.35 + 0.65 * normals @ np.array([0.4, -0.5, 0.77]) / np.linalg.norm(normals, axis=1), 0.2, 1.0)
+    fig = plt.figure(figsize=(5, 5))
+    ax = fig.add_subplot(projection="3d")
+    ax.add_collection3d(Poly3DCollection(points[triangles], facecolors=colours * light[:, None], edgecolors="none"))
+    low, high = points.min(axis=0), points.max(axis=0)
+    centre, half = 0.5 * (low + high), 0.5 * np.max(high - low)
+    for setter, k in ((ax.set_xlim, 0), (ax.set_ylim, 1), (ax.set_zlim, 2)):
+        setter(centre[k] - half, centre[k] + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=15, azim=-60)
+    ax.set_axis_off()
+    ax.set_title(f"{run.name}, t = {time:.3g} (colour: c from 0 to {field.max():.2g})")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
 
 
 def seeded_noise(mesh: Mesh, amplitude: float, seed: int) -> np.ndarray:
