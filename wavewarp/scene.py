@@ -274,6 +274,102 @@ BOX_PARAMETERS = parameters_with(
 )
 
 
+def box_faces(mesh: Mesh):
+    """The planar faces of a box control mesh: (unit normal, offset) per coplanar triangle group."""
+    a, b, c = (mesh.vertices[mesh.triangles[:, k]] for k in range(3))
+    normals = np.cross(b - a, c - a)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    faces = []
+    for n, p in zip(normals, a):
+        if not any(np.allclose(n, m, atol=1e-9) for m, _ in faces):
+            faces.append((n, float(n @ p)))
+    return faces
+
+
+def unfolded_net(run):
+    """Rest vertex positions unfolded into the plane of the face holding the origin (that face and
+    the faces sharing an edge with it), as in Fig. 2b; NaN elsewhere or when the origin lies on
+    an edge or vertex. Returns (points (V, 3) in the origin face's plane, mask, its normal)."""
+    x = run.mesh.vertices
+    scale = np.abs(x).max()
+    faces = box_faces(run.mesh)
+    on = np.array([np.abs(x @ n - d) < 1e-9 * scale for n, d in faces])  # (faces, V)
+    holding = [k for k, (n, d) in enumerate(faces) if abs(run.origin @ n - d) < 1e-9 * scale]
+    out = np.full_like(x, np.nan)
+    if len(holding) != 1:
+        return out, np.zeros(len(x), dtype=bool), None
+    k0 = holding[0]
+    n0 = faces[k0][0]
+    out[on[k0]] = x[on[k0]]
+    for k, (n, _) in enumerate(faces):
+        shared = on[k] & on[k0]
+        if k == k0 or shared.sum() < 2:
+            continue
+        edge = np.cross(n, n0)
+        edge /= np.linalg.norm(edge)
+        angle = math.atan2(np.cross(n, n0) @ edge, n @ n0)
+        K = np.array([[0, -edge[2], edge[1]], [edge[2], 0, -edge[0]], [-edge[1], edge[0], 0]])
+        R = np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K  # Rodrigues: R n = n0
+        anchor = x[np.flatnonzero(shared)[0]]
+        mine = on[k] & ~on[k0]
+        out[mine] = anchor + (x[mine] - anchor) @ R.T
+    return out, ~np.isnan(out[:, 0]), n0
+
+
+def box_wave_measurements(run) -> dict:
+    """Arrival times against the distance in the unfolded net (eikonal |∇T| = 1/γ, Fig. 2b): the
+    speed (slope⁻¹) and the largest deviation from the line in units of the control edge's
+    crossing time; the same fit against the straight chord, which must fit worse."""
+    net, mask, _ = unfolded_net(run)
+    L = run.size
+    distance = np.linalg.norm(net - run.origin, axis=1)
+    arrival = run.arrival.time
+    probe = mask & (arrival > 0) & (distance > 0.15 * L) & (distance < 0.9 * L)
+    if probe.sum() < 10:
+        return {"wave_speed": None, "eikonal_deviation": None, "chord_deviation": None}
+    edge_time = mean_edge(run.mesh) / run.p["gamma"]
+
+    def fit(d):
+        slope, offset = np.polyfit(d[probe], arrival[probe], 1)
+        return 1 / slope, float(np.abs(arrival[probe] - slope * d[probe] - offset).max() / edge_time)
+
+    speed, deviation = fit(distance)
+    chord = np.linalg.norm(run.mesh.vertices - run.origin, axis=1)
+    return {"wave_speed": float(speed), "eikonal_deviation": deviation, "chord_deviation": fit(chord)[1]}
+
+
+def arrival_map_png(run, path) -> None:
+    """Fig. 2b: arrival times on the unfolded net with the eikonal circles s = γ t superposed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_path
+
+    net, mask, n0 = unfolded_net(run)
+    arrival = run.arrival.time
+    reached = mask & (arrival > 0)
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    if reached.any():
+        u = np.cross(n0, [1.0, 0.0, 0.0] if abs(n0[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(n0, u)
+        plane = np.stack([(net - run.origin) @ u, (net - run.origin) @ v], axis=1)
+        ax.scatter(plane[mask, 0], plane[mask, 1], c="0.85", s=4)
+        shown = ax.scatter(plane[reached, 0], plane[reached, 1], c=arrival[reached], s=6, cmap="viridis")
+        fig.colorbar(shown, label="arrival time (half-maximum of c)")
+        for t in np.linspace(0, arrival[reached].max(), 7)[1:]:
+            ax.add_patch(plt.Circle((0, 0), run.p["gamma"] * t, fill=False, color="k", lw=1.0, ls="--"))
+    ax.set_aspect("equal")
+    ax.set_title(f"{run.name} from the {run.p.get('origin', 'origin')}: arrival on the unfolded net\n"
+                 "(dashed: eikonal circles s = γ t)")  # fmt: skip
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+
+
 def box_wave_run(name: str, p: dict, make_box, origins: dict, *, mesh=None, device=None, report=print):
     """A telegraph wave on a quasi-static box (cube or prism) from a face centre, an edge or a vertex."""
     L = p["edge"]
@@ -282,21 +378,35 @@ def box_wave_run(name: str, p: dict, make_box, origins: dict, *, mesh=None, devi
     origin = np.asarray(origins[p["origin"]], dtype=np.float64) * L
     initial = {"kind": "gaussian", "sigma": p["width"] / L}
     return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p["t_end"] or 2 * L / p["gamma"],
-                              rule=p["rule"], device=device)  # fmt: skip
+                              rule=p["rule"], device=device, measure=box_wave_measurements,
+                              figures={"arrival": arrival_map_png})  # fmt: skip
 
 
 class ArrivalTimes:
-    """Per vertex, the time at which the control concentration peaked (the pulse's passage), sampled
-    at every relaxation; `peak` holds the peak value."""
+    """Per vertex, when the pulse arrived: the first crossing of half the vertex's largest control
+    concentration, interpolated between the samples taken at every relaxation (as the arrival
+    checks of tests/test_waves.py). `time` is 0 where the pulse has not (clearly) arrived: a
+    maximum below 1% of the initial peak, or still rising at the last sample."""
 
     def __init__(self, c0: np.ndarray):
-        self.peak = np.asarray(c0, dtype=np.float64).copy()
-        self.time = np.zeros_like(self.peak)
+        self._times, self._values = [0.0], [np.asarray(c0, dtype=np.float64).copy()]
 
     def update(self, c: np.ndarray, time: float) -> None:
-        higher = c > self.peak
-        self.peak[higher] = c[higher]
-        self.time[higher] = time
+        self._times.append(float(time))
+        self._values.append(np.asarray(c, dtype=np.float64).copy())
+
+    @property
+    def time(self) -> np.ndarray:
+        values, times = np.array(self._values), np.array(self._times)
+        peak = values.max(axis=0)
+        valid = (peak > 0.01 * values[0].max()) & (values.argmax(axis=0) < len(times) - 1) & (values[0] < 0.5 * peak)
+        j = np.argmax(values >= 0.5 * peak, axis=0)
+        j = np.maximum(j, 1)
+        columns = np.arange(values.shape[1])
+        before, after = values[j - 1, columns], values[j, columns]
+        fraction = np.clip((0.5 * peak - before) / np.where(after > before, after - before, 1.0), 0.0, 1.0)
+        arrival = times[j - 1] + fraction * (times[j] - times[j - 1])
+        return np.where(valid, arrival, 0.0)
 
 
 def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), rings=12) -> dict:
@@ -310,11 +420,11 @@ def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), ri
     R = run.size
     rest = run.mesh.vertices
     theta = np.arccos(np.clip(rest @ run.origin / (np.linalg.norm(rest, axis=1) * np.linalg.norm(run.origin)), -1, 1))
-    reached = run.arrival.time > 0
-    probe = reached & (theta > theta_range[0]) & (theta < theta_range[1])
+    arrival = run.arrival.time
+    probe = (arrival > 0) & (theta > theta_range[0]) & (theta < theta_range[1])
     if probe.sum() < 10 or run.time < R * theta_range[1] / run.p["gamma"]:
         return {"wave_speed": None, "speed_nonlinearity": None, "arrival_spread": None}
-    s, t = R * theta[probe], run.arrival.time[probe]
+    s, t = R * theta[probe], arrival[probe]
     slope, offset = np.polyfit(s, t, 1)
     crossing = slope * (s.max() - s.min())
     edges = np.linspace(*theta_range, rings + 1)
