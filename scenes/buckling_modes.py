@@ -1,6 +1,8 @@
 """Buckling modes (supplement Fig. S1b, Movie 9; SPEC §5, §6): a steady tanh front; n grows with AI, falls with h/R."""
 
-from wavewarp.scene import SPHERE_PARAMETERS, Param, sphere_wave_run
+import math
+
+from wavewarp.scene import SPHERE_PARAMETERS, Param, buckling_measurements, buckling_png, sphere_wave_run, symmetry_number
 
 NAME = "buckling-modes"
 DESCRIPTION = "buckling modes: steady tanh front on a sphere, AI 7.5–13.5, h/R 0.01–0.075 (Fig. S1b)"
@@ -9,6 +11,9 @@ PARAMETERS = {
     "AC": Param(0.0, "metric coupling (SPEC §6)"),
     "AI": Param(10.5, "curvature coupling; Fig. S1b spans 7.5–13.5"),
     "mu_v": Param(0.0, "volume penalty μV in units of Y h / R⁴ (SPEC §6: none)", minimum=0.0),
+    "overdamped": Param(True, "buckling is an instability: near it a relaxation may not converge within its budget; "
+                        "the paper's overdamped update lets the shell lag its reference there (counted in --json)"),
+    "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
     "noise": Param(1e-4, "position noise / R: breaks the symmetry so the n-fold mode can form", minimum=0.0),
     "k": Param(1.0, "front steepness k (1/length): the front is ~2/k = 2 length units wide, as the oocyte pulse",
                positive=True),
@@ -18,5 +23,9 @@ QUICK = {"level": 3, "frames": 4, "t_end": 4.0}
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
-    initial = {"kind": "front", "k": p["k"], "delta": p["delta"] or 0.5 * p["radius"]}
-    return sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, initial=initial, report=report)
+    delta = p["delta"] or 0.5 * p["radius"]
+    initial = {"kind": "front", "k": p["k"], "delta": delta}
+    run = sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, initial=initial, report=report,
+                          profile=symmetry_number, measure=buckling_measurements, figures={"symmetry": buckling_png})
+    run.front_start = p["radius"] * math.acos(max(-1.0, 1 - delta / p["radius"]))  # the front's arc from the pole
+    return run

@@ -9,7 +9,7 @@ from wavewarp.coupled import QuasiStatic
 from wavewarp.geometry import limit_positions
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
-from wavewarp.shell import Shell
+from wavewarp.shell import RelaxationError, Shell
 from wavewarp.waves import Telegraph
 
 F64 = dict(device="cpu", dtype="float64")
@@ -56,3 +56,19 @@ def test_mismatched_parts_are_refused():
         QuasiStatic(shell, other)
     with pytest.raises(ValueError, match="wave must be"):
         QuasiStatic(shell, "telegraph")
+
+
+def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
+    mesh = icosphere(1.0, 2)
+    c0 = np.full(mesh.n_vertices, 1.0)
+    parts = dict(thickness=0.05, young=1.0, AC=0.3, AI=0.5, **F64)
+    with pytest.raises(RelaxationError, match="relax stopped after 3 iterations"):
+        QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3)
+    run = QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3,
+                      overdamped=True)  # fmt: skip
+    assert run.unconverged == 1 and run.relax_iterations == [3]
+    energy = run.shell.energy(run.positions(), c0)
+    assert energy < run.shell.energy(mesh.vertices, c0)  # three iterations of progress, kept
+    for _ in range(3):
+        run.step()  # each step continues the relaxation from where the last one stopped
+    assert run.shell.energy(run.positions(), c0) < energy

@@ -68,7 +68,7 @@ def _scene_run(args) -> int:
     from .shell import RelaxationError
     from .trajectory import TrajectoryWriter, last_frame
     from .usd import UsdAnimation
-    from .waves import BlowUpError
+    from .waves import BlowUpError, TimeStepError
 
     wp.config.log_level = wp.LOG_WARNING
     start = time.perf_counter()
@@ -121,7 +121,7 @@ def _scene_run(args) -> int:
             while done < run.frames:
                 try:
                     run.advance_frame()
-                except (BlowUpError, RelaxationError) as error:  # the frames so far are complete: keep them
+                except (BlowUpError, RelaxationError, TimeStepError) as error:  # the frames so far are complete: keep them
                     failure = str(error)
                     break
                 frame = run.frame()

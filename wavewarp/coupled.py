@@ -29,10 +29,13 @@ class QuasiStatic:
 
     `sensitive=True`: the wave runs on the current (deformed) surface; False: on the rest
     surface (the deformation-insensitive twin). `tol`: the relaxation tolerance (Shell.relax).
+    `overdamped=True` accepts a relaxation that spends its `max_iterations` (the paper's
+    overdamped update: near a buckling instability the shell lags its reference instead of
+    stopping the run); such steps are counted in `unconverged`.
     """
 
     def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
-                 x0=None):  # fmt: skip
+                 x0=None, max_iterations: int = 20000, overdamped: bool = False):  # fmt: skip
         if not isinstance(shell, Shell):
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         if not isinstance(wave, _Stepper):
@@ -49,6 +52,9 @@ class QuasiStatic:
         if tol is None:
             tol = 1e-5 if shell.scalar == wp.float32 else 1e-9
         self.tol = float(tol)
+        self.max_iterations = _count("max_iterations", max_iterations, 1)
+        self.overdamped = bool(overdamped)
+        self.unconverged = 0  # overdamped relaxations that used their whole iteration budget
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
         self._x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
         self.relax_iterations = []
@@ -66,13 +72,15 @@ class QuasiStatic:
     def _equilibrate(self) -> None:
         self.shell.update_reference(self.wave.c)
         try:
-            x = relax(self.shell, self._x, self.tol, 20000)
+            x = relax(self.shell, self._x, self.tol, self.max_iterations)
         except RelaxationError as error:
-            # stopped at the dtype's round-off floor just above tol (sharp control corners in float32)
-            if not (error.round_off and error.residual <= ROUND_OFF_SLACK * self.tol):
+            if error.round_off and error.residual <= ROUND_OFF_SLACK * self.tol:
+                self.round_off_stops += 1  # the dtype's round-off floor just above tol (sharp corners, float32)
+            elif self.overdamped and not error.round_off:
+                self.unconverged += 1  # overdamped: the shell lags its reference, the next step goes on from here
+            else:
                 raise
             x = error.x
-            self.round_off_stops += 1
         self.relax_iterations.append(len(self.shell.relax_history) - 1)
         self._x.assign(x.astype(self.shell._real))
         if self.sensitive:

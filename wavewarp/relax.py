@@ -102,7 +102,7 @@ def _line_search(shell, x, direction, trial, trial_forces, trial_energy, e0, slo
 
     A step is accepted when it satisfies Armijo's condition, or, where the energy change is
     below round-off (float32 near equilibrium), when it keeps E within round-off and reduces
-    the slope |dE/dα|. Returns (α, E(x + α d)), or (0, e0) when no step helps.
+    the slope |dE/dα| or still descends. Returns (α, E(x + α d)), or (0, e0) when no step helps.
     """
     n = shell.mesh.n_vertices
     device, scalar = shell.device, shell.scalar
@@ -122,7 +122,10 @@ def _line_search(shell, x, direction, trial, trial_forces, trial_energy, e0, slo
     for _ in range(40):
         e, slope_new = (e1, slope1) if candidate == alpha else at(candidate)
         armijo = e <= e0 + ARMIJO * candidate * slope
-        if armijo or (e <= e0 + tolerance and abs(slope_new) < abs(slope)):
+        # below round-off (float32): accept a step that keeps E within round-off and either
+        # flattens the slope or still descends (dE/dα ≤ 0 at both ends: negative curvature near
+        # a buckling instability, where energy differences drown in round-off)
+        if armijo or (e <= e0 + tolerance and (abs(slope_new) < abs(slope) or slope_new <= 0.0)):
             return candidate, e
         candidate *= 0.5
     return 0.0, e0

@@ -116,6 +116,9 @@ TELEGRAPH_PARAMETERS = {
     "relax_every": Param(0, "chemistry steps per relaxation; 0 = as many as keep the wave within half a "
                          "control edge between relaxations (quasi-static: τ_mech ≪ τ_wave)", minimum=0),  # fmt: skip
     "relax_tol": Param(0.0, "relaxation tolerance (a residual strain, Shell.relax); 0 = the dtype's default", minimum=0.0),
+    "relax_iterations": Param(20000, "NCG iteration budget per relaxation", minimum=1),
+    "overdamped": Param(False, "true: a relaxation that spends its budget is accepted (the paper's overdamped "
+                        "update; counted in --json) instead of stopping the run"),  # fmt: skip
     "dtype": Param("float32", "float32 (default; checked against float64 in tests) or float64",
                    choices=("float32", "float64")),  # fmt: skip
 }
@@ -167,7 +170,8 @@ class QuasiStaticWaveRun:
         self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p["frames"] / (relax_every * dt)))
         self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
-                                   tol=p["relax_tol"] or None, x0=x0)  # fmt: skip
+                                   tol=p["relax_tol"] or None, x0=x0, max_iterations=p["relax_iterations"],
+                                   overdamped=p["overdamped"])  # fmt: skip
         self.resolved = {**p, "dt": dt, "relax_every": relax_every}
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
@@ -178,6 +182,7 @@ class QuasiStaticWaveRun:
         self.profiles = []  # per frame: (time, profile along the scene's chosen curve), for figures
         self._profile, self._measure, self._figures = profile, measure, {**(figures or {}), "frame": frame_png}
         self.snapshot = None  # (time, positions, c) of the frame nearest t_end / 3, for the rendered frame
+        self.front_start = 0.0  # rest arc length of the wave front from the origin at t = 0
 
     @property
     def time(self) -> float:
@@ -211,6 +216,7 @@ class QuasiStaticWaveRun:
         if stored:
             self.arrival.update(frame["concentration"], time)
         if self._profile is not None:
+            self.profile_time = time
             self.profiles.append((time, self._profile(self, frame["positions"])))
         target = self.frames * self.steps_per_frame * self.wave.dt / 3
         if self.snapshot is None or abs(time - target) < abs(self.snapshot[0] - target):
@@ -219,7 +225,8 @@ class QuasiStaticWaveRun:
     def measurements(self) -> dict:
         x = self.coupled.positions()
         out = {"time": self.time, "volume": self.shell.volume(x),
-               "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations))}  # fmt: skip
+               "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
+               "unconverged_relaxations": self.coupled.unconverged}  # fmt: skip
         if self._measure is not None:
             out.update(self._measure(self))
         return out
@@ -245,7 +252,8 @@ SPHERE_PARAMETERS = parameters_with(
 )
 
 
-def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initial=None, report=print):
+def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initial=None, report=print,
+                    profile=None, measure=None, figures=None):  # fmt: skip
     """A telegraph wave from the north pole of a quasi-static sphere (oocytes, buckling)."""
     from .mesh import icosphere
 
@@ -256,8 +264,9 @@ def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initi
         initial = {"kind": "gaussian", "sigma": p["width"] / R, "distance": "arc"}
     x0 = seeded_noise(mesh, p["noise"] * R, seed) if p["noise"] > 0 else None
     return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or math.pi * R / p["gamma"],
-                              device=device, x0=x0, profile=meridian_curvature_radius, measure=sphere_wave_measurements,
-                              figures={"kymograph": kymograph_png})  # fmt: skip
+                              device=device, x0=x0, profile=profile or meridian_curvature_radius,
+                              measure=measure or sphere_wave_measurements,
+                              figures=figures or {"kymograph": kymograph_png})  # fmt: skip
 
 
 BOX_PARAMETERS = parameters_with(
@@ -513,6 +522,60 @@ def frame_png(run, path) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def symmetry_number(run, x, threshold=0.01) -> tuple:
+    """(n, amplitude): the dominant azimuthal mode m ≥ 2 of the radial displacement on the latitude
+    ring at the wave front (rest polar angle γ t / R, one control edge wide), and its amplitude in
+    units of h; n = 0 while every mode is below `threshold` h (axisymmetric)."""
+    R = run.size
+    rest = run.mesh.vertices
+    axis = run.origin / np.linalg.norm(run.origin)
+    theta = np.arccos(np.clip(rest @ axis / np.linalg.norm(rest, axis=1), -1, 1))
+    front = min((run.front_start + run.p["gamma"] * run.profile_time) / R, math.pi)
+    ring = np.abs(theta - front) < 0.5 * mean_edge(run.mesh) / R
+    if ring.sum() < 8:
+        return 0, 0.0
+    side = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    phi = np.arctan2(rest[ring] @ np.cross(axis, side), rest[ring] @ side)
+    radial = np.linalg.norm(np.asarray(x)[ring], axis=1)
+    radial -= radial.mean()
+    modes = np.arange(2, max(3, ring.sum() // 2))
+    amplitude = np.abs(np.exp(-1j * np.outer(modes, phi)) @ radial) * 2 / ring.sum() / run.p["thickness"]
+    k = int(np.argmax(amplitude))
+    return (int(modes[k]) if amplitude[k] > threshold else 0), float(amplitude[k])
+
+
+def buckling_measurements(run) -> dict:
+    n = [int(value[0]) for _, value in run.profiles]
+    times = [t for t, _ in run.profiles]
+    k = int(np.argmax(n)) if n else 0
+    return {"symmetry_numbers": n, "n_max": n[k] if n else 0, "t_n_max": times[k] if n else None,
+            "t_front_at_equator": (0.5 * math.pi * run.size - run.front_start) / run.p["gamma"]}  # fmt: skip
+
+
+def buckling_png(run, path) -> None:
+    """Fig. S1a: the buckling symmetry number n at the wave front against time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_path
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    ax.plot([t for t, _ in run.profiles], [value[0] for _, value in run.profiles], "o-")
+    ax.axvline((0.5 * math.pi * run.size - run.front_start) / run.p["gamma"], color="0.5", ls="--",
+               label="front at the equator")  # fmt: skip
+    ax.set_xlabel("time")
+    ax.set_ylabel("symmetry number n at the front")
+    ax.set_title(f"{run.name}: n-fold buckling (supplement Fig. S1a)")
+    ax.legend()
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
 
 

@@ -56,6 +56,10 @@ class BlowUpError(RuntimeError):
         self.steps = steps
 
 
+class TimeStepError(ValueError):
+    """A fixed dt exceeds the method's stability bound (at construction, or after the surface moved)."""
+
+
 def _positive(name: str, value) -> float:
     value = float(value)
     if not math.isfinite(value) or value <= 0:
@@ -146,7 +150,7 @@ class _Stepper(ABC):
         else:
             dt = self._requested_dt
             if self.check_dt and dt > self._stable_dt:
-                raise ValueError(
+                raise TimeStepError(
                     f"dt = {dt:.6g} exceeds the stability bound {self._stable_dt:.6g} of the {self.scheme} "
                     f"({self.bound_formula}, λ_max(M⁻¹K) = {self.largest_eigenvalue:.6g} by power iteration): "
                     f"use dt <= {self._stable_dt:.6g}, e.g. dt = {self.safety * self._stable_dt:.6g} "
