@@ -73,7 +73,10 @@ def sphere_spectrum_error(level, discretization, mass):
     """Largest relative error of the 48 eigenvalues l = 1..6 of K φ = λ M φ on the unit sphere."""
     op = LaplaceBeltrami(icosphere(1.0, level), discretization=discretization, **F64)
     M = sp.diags(op.mass()) if mass == "lumped" else op.mass_matrix()
-    values = np.sort(sla.eigsh(op.stiffness_matrix(), k=49, M=M, sigma=-0.1, return_eigenvectors=False))
+    # 64 = l <= 7 requested, 49 kept: ARPACK can drop a copy of a degenerate eigenvalue at the edge
+    # of the requested set (seen: one l = 6 eigenvalue replaced by an l = 7 one)
+    start = np.random.default_rng(1).uniform(0.5, 1.5, op.n_vertices)
+    values = np.sort(sla.eigsh(op.stiffness_matrix(), k=64, M=M, sigma=-0.1, v0=start, return_eigenvectors=False))[:49]
     return values, np.max(np.abs(values[1:] - EXACT[1:]) / EXACT[1:])
 
 
