@@ -180,3 +180,23 @@ def test_cube_wave_arrives_after_the_unfolded_net_distance(tmp_path, capsys):
     assert result["eikonal_deviation"] < 1.0
     assert result["chord_deviation"] > 2 * result["eikonal_deviation"]
     assert any(path.endswith("_arrival.png") for path in result["outputs"])
+
+
+def test_xdmf_frames_for_paraview(tmp_path, capsys):
+    import meshio
+
+    xdmf = tmp_path / "run.xdmf"
+    code, out, err = run_cli(capsys, "starfish", "--quick", "--device", "cpu", "--out", str(tmp_path / "run.usda"),
+                             "--xdmf", str(xdmf), "--json")  # fmt: skip
+    assert code == 0, err
+    frames = json.loads(out)["frames"]
+    with meshio.xdmf.TimeSeriesReader(str(xdmf)) as reader:
+        points, cells = reader.read_points_cells()
+        assert reader.num_steps == frames and cells[0].data.shape[1] == 3
+        first, last = reader.read_data(0)[1], reader.read_data(frames - 1)[1]
+    assert np.abs(last["displacement"] - first["displacement"]).max() > 1e-3  # the shell moved between frames
+    assert last["concentration"].shape == (len(points),)
+    assert not [p for p in os.listdir(tmp_path) if p.startswith(".")]
+    code, _, err = run_cli(capsys, "starfish", "--quick", "--device", "cpu", "--out", str(tmp_path / "b.usda"), "--h5",
+                           str(tmp_path / "b.h5"), "--xdmf", str(tmp_path / "b.xdmf"))  # fmt: skip
+    assert code == 2 and "keeps its data in" in err and not (tmp_path / "b.usda").exists()

@@ -86,8 +86,14 @@ def _scene_run(args) -> int:
     else:
         p = resolve(module.PARAMETERS, getattr(module, "QUICK", {}) if args.quick else None, args.set)
     out = args.out or f"{module.NAME}.usda"
-    for path in [out] + ([args.h5] if args.h5 else []):
+    for path in [out] + [p for p in (args.h5, args.xdmf) if p]:
         check_writable(path)
+    if args.xdmf:
+        if not args.xdmf.endswith(".xdmf"):
+            raise ValueError(f"XDMF output {args.xdmf!r} must end in .xdmf")
+        sidecar = os.path.splitext(args.xdmf)[0] + ".h5"
+        if args.h5 and os.path.abspath(sidecar) == os.path.abspath(args.h5):
+            raise ValueError(f"--xdmf {args.xdmf} keeps its data in {sidecar}, the --h5 file: choose another name")
 
     def report(message):
         print(f"wavewarp run {module.NAME}: {message}", file=sys.stderr)
@@ -100,22 +106,41 @@ def _scene_run(args) -> int:
         h5 = TrajectoryWriter(args.h5, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
                               scene=module.NAME, parameters=run.resolved, device=str(run.shell.device),
                               resume=args.resume)  # fmt: skip
+    xdmf = None
+    if args.xdmf:
+        from .geometry import limit_positions
+        from .xdmf import XdmfWriter
+
+        def limit_points(x):
+            return limit_positions(run.mesh, x, device=run.operator.device, dtype="float64")
+
+        xdmf = XdmfWriter(args.xdmf, triangles=run.mesh.triangles, rest_points=limit_points(run.mesh.vertices))
+
+    def write(time, frame):
+        usd.add_frame(frame["positions"], frame["concentration"])
+        if h5 is not None:
+            h5.add_frame(time, **frame)
+        if xdmf is not None:
+            xdmf.add_frame(time, limit_points(frame["positions"]), run.operator.field_values(frame["concentration"]))
+
     progress = _Progress(module.NAME, run.frames)
     interrupted, failure = False, None
     signal.signal(signal.SIGTERM, _terminate)  # a batch system's stop keeps the frames, as Ctrl-C does
     try:
-        with usd, (h5 if h5 is not None else contextlib.nullcontext()):
+        with usd, h5 or contextlib.nullcontext(), xdmf or contextlib.nullcontext():
             if args.resume:
                 for k in range(len(frames["time"])):
-                    usd.add_frame(frames["positions"][k], frames["concentration"][k])
-                    run.record(frames["time"][k], {name: frames[name][k] for name in frames}, stored=True)
+                    frame = {name: frames[name][k] for name in frames if name != "time"}
+                    usd.add_frame(frame["positions"], frame["concentration"])
+                    if xdmf is not None:
+                        xdmf.add_frame(frames["time"][k], limit_points(frame["positions"]),
+                                       run.operator.field_values(frame["concentration"]))  # fmt: skip
+                    run.record(frames["time"][k], frame, stored=True)
                 run.restore(last_frame(args.h5))
                 done = len(frames["time"]) - 1
             else:
                 frame = run.frame()
-                usd.add_frame(frame["positions"], frame["concentration"])
-                if h5 is not None:
-                    h5.add_frame(run.time, **frame)
+                write(run.time, frame)
                 run.record(run.time, frame)
                 done = 0
             while done < run.frames:
@@ -125,9 +150,7 @@ def _scene_run(args) -> int:
                     failure = str(error)
                     break
                 frame = run.frame()
-                usd.add_frame(frame["positions"], frame["concentration"])
-                if h5 is not None:
-                    h5.add_frame(run.time, **frame)
+                write(run.time, frame)
                 run.record(run.time, frame)
                 done += 1
                 progress.update(done, run.time)
@@ -138,7 +161,7 @@ def _scene_run(args) -> int:
     if failure:
         print(f"wavewarp run {module.NAME}: {failure}; kept the {usd.frames} frames before it", file=sys.stderr)
         return 1
-    outputs = [out] + ([args.h5] if args.h5 else [])
+    outputs = [out] + [p for p in (args.h5, args.xdmf) if p]
     if usd.frames > 1:
         outputs += run.figures(os.path.splitext(out)[0])
     summary = {
@@ -246,6 +269,7 @@ def main(argv=None) -> int:
     run.add_argument("--h5", default=None, help="HDF5 trajectory to write (or, with --resume, to continue)")
     run.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scene parameter")
+    run.add_argument("--xdmf", default=None, help="also write frames for ParaView (FILE.xdmf + FILE.h5)")
     run.add_argument("--mesh", default=None, help="any closed triangle mesh file in place of the scene's surface")
     run.add_argument("--quick", action="store_true", help="a reduced run for smoke tests (under a minute on a CPU)")
     run.add_argument("--seed", type=int, default=0, help="seed of the scene's random perturbations")
