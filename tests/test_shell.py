@@ -8,7 +8,7 @@ from scipy.spatial.transform import Rotation
 from test_subdivision import rotated_corners
 
 from wavewarp.geometry import limit_positions
-from wavewarp.mesh import Mesh, cube, icosphere, prism
+from wavewarp.mesh import cube, icosphere, prism
 from wavewarp.shell import RelaxationError, Shell
 
 F64 = dict(dtype="float64")

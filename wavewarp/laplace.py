@@ -26,7 +26,7 @@ import numpy as np
 import warp as wp
 
 from .device import mat22, numpy_dtype
-from .geometry import LimitMask, SurfaceTables, checked_positions
+from .geometry import LimitMask, SurfaceTables
 from .kernels.laplace import (
     assemble_mass_kernel,
     assemble_stiffness_kernel,

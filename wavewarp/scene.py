@@ -15,7 +15,6 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
-import warp as wp
 
 from .coupled import QuasiStatic
 from .laplace import LaplaceBeltrami
@@ -582,7 +581,3 @@ def buckling_png(run, path) -> None:
 def seeded_noise(mesh: Mesh, amplitude: float, seed: int) -> np.ndarray:
     """Positions perturbed by `amplitude` × a standard normal per coordinate (to break symmetry)."""
     return mesh.vertices + amplitude * np.random.default_rng(seed).standard_normal(mesh.vertices.shape)
-
-
-def device_name(device) -> str:
-    return str(wp.get_device(device))
