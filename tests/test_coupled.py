@@ -24,11 +24,12 @@ def closed_form_stretch(AC, AI, c, h_over_R):
 
 
 @pytest.mark.parametrize("sensitive", [True, False])
-def test_uniform_concentration_reaches_the_closed_form_radius_and_moves_the_wave(sensitive):
+def test_uniform_concentration_reaches_the_closed_form_radius_and_moves_the_wave(sensitive, device):
     R, h, AC, AI, c = 1.0, 0.05, 0.3, 0.5, 1.0
     mesh = icosphere(R, 3)
-    shell = Shell(mesh, thickness=h, young=1.0, AC=AC, AI=AI, **F64)
-    op = LaplaceBeltrami(mesh, **F64)
+    on_device = dict(device=device, dtype="float64")
+    shell = Shell(mesh, thickness=h, young=1.0, AC=AC, AI=AI, **on_device)
+    op = LaplaceBeltrami(mesh, **on_device)
     wave = Telegraph(op, 1.0, c0=np.full(mesh.n_vertices, c))  # K·1 = 0: c stays uniform
     bound = wave.stable_dt
     run = QuasiStatic(shell, wave, sensitive=sensitive, chemistry_steps=5)

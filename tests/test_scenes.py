@@ -27,11 +27,11 @@ def test_every_scene_is_listed():
 
 
 @pytest.mark.parametrize("scene", SCENES)
-def test_quick_run_writes_usd_and_hdf5(scene, tmp_path, capsys):
+def test_quick_run_writes_usd_and_hdf5(scene, device, tmp_path, capsys):
     from pxr import Usd, UsdGeom
 
     usd, h5 = tmp_path / "run.usda", tmp_path / "run.h5"
-    code, out, err = run_cli(capsys, scene, "--quick", "--device", "cpu", "--out", str(usd), "--h5", str(h5), "--json")
+    code, out, err = run_cli(capsys, scene, "--quick", "--device", device, "--out", str(usd), "--h5", str(h5), "--json")
     assert code == 0, err
     summary = json.loads(out)
     assert summary["scene"] == scene and summary["outputs"][:2] == [str(usd), str(h5)] and summary["steps"] > 0
