@@ -11,6 +11,7 @@ def _element(role: str, scalar):
         "vec3": wp.types.vector(3, scalar),
         "vec6": wp.types.vector(6, scalar),
         "mat22": wp.types.matrix((2, 2), scalar),
+        "mat33": wp.types.matrix((3, 3), scalar),
     }[role]
 
 
@@ -18,7 +19,7 @@ def declare_overloads(kernel, **roles):
     """Register a generic kernel's float32 and float64 overloads up front.
 
     `roles` maps each `Any` argument to "ROLE" (a value), "ROLE[]" (1-D array) or "ROLE[,]"
-    (2-D array), ROLE one of scalar, vec3, vec6, mat22. With every overload known when the
+    (2-D array), ROLE one of scalar, vec3, vec6, mat22, mat33. With every overload known when the
     module first loads, Warp compiles each module once instead of once per new overload.
     """
     for scalar in SCALARS:

@@ -12,6 +12,7 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+source"
 
+from .dynamics import Ground, ShellDynamics  # noqa: E402
 from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
 from .laplace import LaplaceBeltrami  # noqa: E402
 from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
@@ -19,7 +20,8 @@ from .shell import RelaxationError, Shell  # noqa: E402
 from .waves import BlowUpError, FitzHughNagumo, Telegraph, gaussian_pulse, steady_front  # noqa: E402
 
 __all__ = [
-    "BlowUpError", "FitzHughNagumo", "LaplaceBeltrami", "LimitSurface", "Mesh", "RelaxationError", "Shell", "Telegraph",
+    "BlowUpError", "FitzHughNagumo", "Ground", "LaplaceBeltrami", "LimitSurface", "Mesh", "RelaxationError", "Shell",
+    "ShellDynamics", "Telegraph",
     "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism", "sample_points", "save",
     "steady_front", "__version__",
 ]  # fmt: skip

@@ -93,7 +93,8 @@ class Shell:
             raise ValueError(f"gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
         self.model, self.gradient, self.deterministic = model, gradient, bool(deterministic)
 
-        self.tables = SurfaceTables.of(mesh, str(rule), device=device, dtype=dtype)
+        self.rule = str(rule)
+        self.tables = SurfaceTables.of(mesh, self.rule, device=device, dtype=dtype)
         self.device, self.scalar, self.vec3 = self.tables.device, self.tables.scalar, self.tables.vec3
         self._real = numpy_dtype(self.scalar)
         n_q = self.tables.n_quadrature_points
@@ -142,6 +143,7 @@ class Shell:
     def update_reference(self, c: wp.array) -> None:
         """Active reference ā, ā⁻¹, b̄, dω̄ at every quadrature point from control values c."""
         t = self.tables
+        self._c_host = None  # the NumPy API's cached c no longer describes the reference
         wp.launch(
             active_reference_kernel,
             dim=t.n_quadrature_points,
@@ -194,23 +196,28 @@ class Shell:
                       inputs=[self._volume, wp.float64(self.rest_volume), wp.float64(self.volume_penalty)],
                       outputs=[energy], device=self.device)  # fmt: skip
 
-    def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
-        """forces = -∂E/∂x and energy[0] = E at the current reference (both overwritten)."""
+    def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array | None = None) -> None:
+        """forces = -∂E/∂x and, when given, energy[0] = E at the current reference (both overwritten).
+
+        With energy=None only the forces, reduced with atomics: capturable in a CUDA graph (dynamics).
+        """
         forces.zero_()
         if self.gradient == "autodiff":
-            self._autodiff_forces(x, forces, energy)
+            self._autodiff_forces(x, forces, self._energy if energy is None else energy)
             return
         t = self.tables
         flag = int(self.deterministic)
         wp.launch(koiter_forces_kernel, dim=t.n_quadrature_points, inputs=self._elastic_inputs(x) + [flag],
                   outputs=[self._energy_density, forces, self._slots], device=self.device)  # fmt: skip
         self._gather(forces)
-        self._sum(self._energy_density, energy, differentiable=False)
+        if energy is not None:
+            self._sum(self._energy_density, energy, differentiable=False)
         if self.volume_penalty > 0:
             target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
-            self._launch_volume(x, differentiable=False)
-            wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
-                      device=self.device)  # fmt: skip
+            self._launch_volume(x, differentiable=energy is None)
+            if energy is not None:
+                wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
+                          device=self.device)  # fmt: skip
             wp.launch(
                 volume_forces_kernel, dim=t.n_quadrature_points,
                 inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
@@ -241,6 +248,16 @@ class Shell:
     # ---------------------------------------------------------------- NumPy API
     def _set(self, x, c) -> wp.array:
         x = checked_positions(x, self.mesh.n_vertices)
+        c = self.checked_concentrations(c)
+        self._x.assign(x.astype(self._real))
+        if self._c_host is None or not np.array_equal(c, self._c_host):
+            self._c.assign(c.astype(self._real))
+            self.update_reference(self._c)
+            self._c_host = c.copy()
+        return self._x
+
+    def checked_concentrations(self, c) -> np.ndarray:
+        """(V,) finite float64 control concentrations (a scalar fills every vertex), or ValueError."""
         c = np.asarray(c, dtype=np.float64)
         if c.shape == ():
             c = np.full(self.mesh.n_vertices, float(c))
@@ -248,12 +265,7 @@ class Shell:
             raise ValueError(f"c must have shape ({self.mesh.n_vertices},) for this mesh, got {c.shape}")
         if not np.all(np.isfinite(c)):
             raise ValueError(f"c[{int(np.flatnonzero(~np.isfinite(c))[0])}] is not finite (NaN or Inf)")
-        self._x.assign(x.astype(self._real))
-        if self._c_host is None or not np.array_equal(c, self._c_host):
-            self._c.assign(c.astype(self._real))
-            self.update_reference(self._c)
-            self._c_host = c.copy()
-        return self._x
+        return c
 
     def energy(self, x, c=0.0) -> float:
         """Total energy E_S + E_B + E_V at positions x (V, 3) and control concentrations c (V,)."""

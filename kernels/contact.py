@@ -1,0 +1,77 @@
+"""External forces on the walkers (SPEC §4), one kernel per term.
+
+Gravity acts on the control points (exact: ∂/∂x_I of ρ g ∫ z dω̄⁰ is M_I g). Contact and
+friction act on the limit points p = L x with velocities u = L v (L the Loop limit mask) and
+reach the control points through Lᵀ, which does the same virtual work (f·u = (Lᵀf)·v).
+"""
+
+from typing import Any
+
+import warp as wp
+
+from . import declare_overloads
+
+
+@wp.kernel
+def gravity_kernel(mass: wp.array(dtype=Any), g: Any, forces: wp.array(dtype=Any)):
+    """forces_I += -M_I g ẑ (SPEC §4)."""
+    i = wp.tid()
+    f = forces[i]
+    f[2] = f[2] - mass[i] * g
+    forces[i] = f
+
+
+@wp.kernel
+def ground_contact_kernel(
+    p: wp.array(dtype=Any), u: wp.array(dtype=Any), k: Any, beta: Any,
+    normal_force: wp.array(dtype=Any), limit_forces: wp.array(dtype=Any),
+):  # fmt: skip
+    """Ground z = 0: F_n = max(k z² - β u_z, 0) ẑ where z ≤ 0 (SPEC §4; the max drops adhesion)."""
+    i = wp.tid()
+    z = p[i][2]
+    zero = type(z)(0.0)
+    fn = k * z * z - beta * u[i][2]
+    if z > zero or fn < zero:  # above ground, or pulling down: no contact force
+        fn = zero
+    normal_force[i] = fn
+    limit_forces[i] = type(p[i])(zero, zero, fn)
+
+
+@wp.kernel
+def friction_kernel(
+    u: wp.array(dtype=Any), normal_force: wp.array(dtype=Any), mu: Any, k_f: Any, limit_forces: wp.array(dtype=Any)
+):  # fmt: skip
+    """F_f = -μ |F_n| tanh(k_f |v_t|) v_t / |v_t|, v_t the velocity tangential to the ground (SPEC §4)."""
+    i = wp.tid()
+    fn = normal_force[i]
+    zero = type(fn)(0.0)
+    v_t = type(u[i])(u[i][0], u[i][1], zero)
+    speed = wp.length(v_t)
+    if speed > zero and fn > zero:
+        limit_forces[i] = limit_forces[i] - (mu * fn * wp.tanh(k_f * speed) / speed) * v_t
+
+
+@wp.kernel
+def limit_transpose_kernel(
+    limit_forces: wp.array(dtype=Any),
+    ring_start: wp.array(dtype=wp.int32),
+    ring: wp.array(dtype=wp.int32),
+    centre_weight: wp.array(dtype=Any),
+    ring_weight: wp.array(dtype=Any),
+    forces: wp.array(dtype=Any),
+):
+    """forces_J += (Lᵀ f)_J = (1 - N_J χ_J) f_J + Σ_{I ∈ ring(J)} χ_I f_I (rings are symmetric)."""
+    j = wp.tid()
+    s = centre_weight[j] * limit_forces[j]
+    for k in range(ring_start[j], ring_start[j + 1]):
+        i = ring[k]
+        s += ring_weight[i] * limit_forces[i]
+    forces[j] = forces[j] + s
+
+
+declare_overloads(gravity_kernel, mass="scalar[]", g="scalar", forces="vec3[]")
+declare_overloads(ground_contact_kernel, p="vec3[]", u="vec3[]", k="scalar", beta="scalar", normal_force="scalar[]",
+                  limit_forces="vec3[]")  # fmt: skip
+declare_overloads(friction_kernel, u="vec3[]", normal_force="scalar[]", mu="scalar", k_f="scalar", limit_forces="vec3[]")
+declare_overloads(limit_transpose_kernel, limit_forces="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]",
+                  forces="vec3[]")  # fmt: skip

@@ -1,0 +1,87 @@
+"""Shell dynamics of the walkers (SPEC §3 "Walker scenes"): symplectic Euler with lumped mass."""
+
+from typing import Any
+
+import warp as wp
+
+from . import declare_overloads
+
+
+@wp.kernel
+def momentum_kernel(mass: wp.array(dtype=Any), v: wp.array(dtype=Any), momentum: wp.array(dtype=Any)):
+    """momentum[0] += Σ M_I v_I (zeroed by the caller)."""
+    i = wp.tid()
+    wp.atomic_add(momentum, 0, mass[i] * v[i])
+
+
+@wp.kernel
+def rigid_sums_kernel(
+    forces: wp.array(dtype=Any), mass: wp.array(dtype=Any), x: wp.array(dtype=Any),
+    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any),
+):  # fmt: skip
+    """sums += [Σ F, Σ x × F, Σ M x]; second_moment += Σ M x xᵀ (zeroed by the caller)."""
+    i = wp.tid()
+    wp.atomic_add(sums, 0, forces[i])
+    wp.atomic_add(sums, 1, wp.cross(x[i], forces[i]))
+    wp.atomic_add(sums, 2, mass[i] * x[i])
+    wp.atomic_add(second_moment, 0, mass[i] * wp.outer(x[i], x[i]))
+
+
+@wp.kernel
+def rigid_correction_kernel(
+    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any), inverse_total_mass: Any,
+    correction: wp.array(dtype=Any),
+):  # fmt: skip
+    """The rigid-body acceleration of the net force N and torque τ: [N/ΣM, α = I⁻¹τ, centre c]."""
+    total = type(inverse_total_mass)(1.0) / inverse_total_mass
+    c = inverse_total_mass * sums[2]
+    torque = sums[1] - wp.cross(c, sums[0])
+    S = second_moment[0] - total * wp.outer(c, c)
+    inertia = wp.trace(S) * wp.identity(n=3, dtype=type(inverse_total_mass)) - S
+    correction[0] = inverse_total_mass * sums[0]
+    correction[1] = wp.inverse(inertia) * torque
+    correction[2] = c
+
+
+@wp.kernel
+def symplectic_euler_kernel(
+    forces: wp.array(dtype=Any),
+    inverse_mass: wp.array(dtype=Any),
+    momentum: wp.array(dtype=Any),
+    rigid: wp.array(dtype=Any),
+    inverse_total_mass: Any,
+    damping: Any,
+    dt: Any,
+    x: wp.array(dtype=Any),
+    v: wp.array(dtype=Any),
+):
+    """v += dt (F/M - a_rigid - η (v - v̄)), then x += dt v.
+
+    a_rigid = N/ΣM + α × (x - c) undoes the net force and torque of the internal forces' round-off
+    (zero in exact arithmetic; in float32 they would set a resting shell rolling); v̄ = P / ΣM,
+    so the damping keeps the momentum.
+    """
+    i = wp.tid()
+    mean = inverse_total_mass * momentum[0]
+    accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], x[i] - rigid[2])
+    vi = v[i] + dt * (accel - damping * (v[i] - mean))
+    v[i] = vi
+    x[i] = x[i] + dt * vi
+
+
+@wp.kernel
+def speed_runaway_kernel(v: wp.array(dtype=Any), limit: Any, flag: wp.array(dtype=wp.int32)):
+    """flag = 1 where |v_I| > limit or v_I is NaN/Inf (NaN fails every comparison)."""
+    i = wp.tid()
+    if not (wp.length(v[i]) <= limit):
+        flag[0] = 1
+
+
+declare_overloads(momentum_kernel, mass="scalar[]", v="vec3[]", momentum="vec3[]")
+declare_overloads(rigid_sums_kernel, forces="vec3[]", mass="scalar[]", x="vec3[]", sums="vec3[]",
+                  second_moment="mat33[]")  # fmt: skip
+declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]", inverse_total_mass="scalar",
+                  correction="vec3[]")  # fmt: skip
+declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", momentum="vec3[]",
+                  rigid="vec3[]", inverse_total_mass="scalar", damping="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+declare_overloads(speed_runaway_kernel, v="vec3[]", limit="scalar")

@@ -1,0 +1,293 @@
+"""Shell dynamics for the walkers (SPEC §3 "Walker scenes", §4; choice in docs/walkers.md).
+
+    M_I dv_I/dt = F_I(x) - M_I g ẑ + (Lᵀ f_ground)_I - η M_I (v_I - v̄),     dx_I/dt = v_I
+
+(the net force and torque of F, zero in exact arithmetic, are removed from F's round-off as a
+rigid-body acceleration: float32 shells would otherwise drift and roll), with the lumped mass M_I = ρ ∫ N_I dω̄⁰ (so Σ M_I x_I / Σ M_I is exactly the centre of mass of
+the surface density ρ), the internal forces F of `Shell`, gravity, the ground's contact and
+friction forces f_ground on the limit points p = L x (L the Loop limit mask), and an optional
+light damping η of the velocity relative to the mean velocity v̄ (internal vibrations only: it
+exerts no net force, so it can neither fake nor brake locomotion). Symplectic (semi-implicit)
+Euler: v first, then x with the new v.
+
+Stability (guarded like the chemistry steppers): dt < 2/ω (√(1 + ζ²) - ζ), with ω² the largest
+eigenvalue of M⁻¹H (H the Hessian of the shell energy, by Lanczos on central force
+differences) and ζ = (η + η_ground) / 2ω, η_ground = β max_J (Lᵀ1)_J / M_J the contact damping
+per unit mass. The contact stiffness 2k|z| is small against the shell's at the scenes'
+penetrations; a runaway it causes is caught by the blow-up check.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .geometry import LimitMask, checked_positions
+from .kernels import contact as kernels_contact
+from .kernels import dynamics as kernels_dynamics
+from .kernels import limit_surface as kernels_limit_surface
+from .kernels import shell as kernels_shell
+from .kernels.contact import friction_kernel, gravity_kernel, ground_contact_kernel, limit_transpose_kernel
+from .kernels.dynamics import (
+    momentum_kernel,
+    rigid_correction_kernel,
+    rigid_sums_kernel,
+    speed_runaway_kernel,
+    symplectic_euler_kernel,
+)
+from .kernels.limit_surface import limit_positions_kernel
+from .laplace import LaplaceBeltrami
+from .shell import Shell
+from .waves import BlowUpError, TimeStepError, _count, _finite, _positive
+
+
+@dataclass(frozen=True)
+class Ground:
+    """The ground z = 0 (SPEC §4): F_n = max(k z² - β v_z, 0) where z ≤ 0, F_f = -μ F_n tanh(k_f |v_t|) v̂_t."""
+
+    stiffness: float = 10.0  # k
+    damping: float = 0.5  # β
+    friction: float = 0.1  # μ
+    sharpness: float = 0.1  # k_f
+
+    def __post_init__(self):
+        for name in ("stiffness", "damping", "friction", "sharpness"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"Ground.{name} must be a finite number >= 0, got {value!r}")
+
+
+class ShellDynamics:
+    """Inertial dynamics of `shell` (positions x, velocities v on its device and dtype).
+
+    density ρ (mass per reference area); c the control concentrations of the active reference
+    (default 0; a coupled stepper updates it with `shell.update_reference`); gravity g (along -z; 0 for none); ground a `Ground` or
+    None; damping η ≥ 0 (relative to the mean velocity); dt None picks `safety` × the stability
+    bound, a fixed dt past it raises TimeStepError (check_dt=False lets it run: stability studies). Every `check_every` steps one flag is read:
+    NaN/Inf or a speed past `speed_limit` raises BlowUpError with the state restored.
+    """
+
+    scheme = "symplectic Euler shell dynamics"
+
+    def __init__(self, shell: Shell, *, density, gravity=0.0, ground: Ground | None = None, damping=0.0, x0=None,
+                 v0=None, c=None, dt=None, safety=0.9, check_dt=True, check_every=100, speed_limit=None,
+                 capture=True):  # fmt: skip
+        if not isinstance(shell, Shell):
+            raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
+        if ground is not None and not isinstance(ground, Ground):
+            raise ValueError(f"ground must be a wavewarp.dynamics.Ground or None, got {type(ground).__name__}")
+        self.shell, self.ground = shell, ground
+        self.device, self.scalar, self.vec3, self._real = shell.device, shell.scalar, shell.vec3, shell._real
+        self.density = _positive("density", density)
+        self.gravity = _finite("gravity", gravity)
+        self.damping = _finite("damping", damping)
+        if self.gravity < 0 or self.damping < 0:
+            raise ValueError(f"gravity and damping must be >= 0, got gravity={gravity!r}, damping={damping!r}")
+        self.safety = _positive("safety", safety)
+        if self.safety > 1:
+            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+        self.check_every = _count("check_every", check_every, 1)
+        self.capture = bool(capture) and wp.get_device(self.device).is_cuda
+        mesh = shell.mesh
+        n = mesh.n_vertices
+        rest = LaplaceBeltrami(mesh, rule=shell.rule, device=self.device, dtype="float64")
+        self.mass = self.density * rest.mass()  # ρ ∫ N_I dω̄⁰ on the rest surface
+        self.total_mass = float(self.mass.sum())
+        self.mask = LimitMask.of(mesh, device=self.device, dtype=self.scalar.__name__)
+        x0 = mesh.vertices if x0 is None else checked_positions(x0, n, "x0")
+        v0 = np.zeros((n, 3)) if v0 is None else checked_positions(v0, n, "v0")
+        with wp.ScopedDevice(self.device):
+            self.x = wp.array(x0.astype(self._real), dtype=self.vec3)
+            self.v = wp.array(v0.astype(self._real), dtype=self.vec3)
+            self._mass = wp.array(self.mass.astype(self._real), dtype=self.scalar)
+            self._inverse_mass = wp.array((1.0 / self.mass).astype(self._real), dtype=self.scalar)
+            self._forces = wp.zeros(n, dtype=self.vec3)
+            self._momentum = wp.zeros(1, dtype=self.vec3)
+            self._rigid_sums = wp.zeros(3, dtype=self.vec3)
+            self._second_moment = wp.zeros(1, dtype=wp.types.matrix((3, 3), self.scalar))
+            self._rigid = wp.zeros(3, dtype=self.vec3)
+            self._limit_x = wp.zeros(n, dtype=self.vec3)
+            self._limit_v = wp.zeros(n, dtype=self.vec3)
+            self._limit_forces = wp.zeros(n, dtype=self.vec3)
+            self._normal_force = wp.zeros(n, dtype=self.scalar)
+            self._flag = wp.zeros(1, dtype=wp.int32)
+            self._backups = [wp.empty_like(self.x), wp.empty_like(self.v)]
+        c = np.zeros(n) if c is None else shell.checked_concentrations(c)
+        shell.update_reference(wp.array(c.astype(self._real), dtype=self.scalar, device=self.device))
+        self.time, self.steps = 0.0, 0
+        self._graphs = {}
+        self.omega_max = self.largest_frequency()
+        self.stable_dt = self._bound(self.omega_max)
+        if dt is None:
+            self.dt = self.safety * self.stable_dt
+        else:
+            self.dt = _positive("dt", dt)
+            if check_dt and self.dt > self.stable_dt:
+                raise TimeStepError(
+                    f"dt = {self.dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
+                    f"(dt < 2/ω (√(1+ζ²) - ζ), ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos, "
+                    f"ζ = {self._zeta(self.omega_max):.3g}): use dt <= {self.stable_dt:.6g}, e.g. "
+                    f"dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), or dt=None"
+                )  # fmt: skip
+        typical = self.gravity * 1e3 * self.dt * self.check_every + float(np.abs(v0).max()) + 1.0
+        self.speed_limit = _positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
+
+    # ---------------------------------------------------------------- stability bound
+    def _ground_damping(self) -> float:
+        if self.ground is None:
+            return 0.0
+        m = self.mask
+        chi = np.repeat(m.ring_weight.numpy().astype(np.float64), np.diff(m.ring_start.numpy()))
+        column_sums = m.centre_weight.numpy() + np.bincount(m.ring.numpy(), weights=chi, minlength=len(self.mass))
+        return self.ground.damping * float(np.max(column_sums / self.mass))
+
+    def _zeta(self, omega: float) -> float:
+        return (self.damping + self._ground_damping()) / (2 * omega)
+
+    def _bound(self, omega: float) -> float:
+        zeta = self._zeta(omega)
+        return 2.0 / omega * (math.sqrt(1 + zeta**2) - zeta)
+
+    def largest_frequency(self, tol: float = 1e-6) -> float:
+        """ω = √λ_max(M⁻¹H) at the current positions and reference: Lanczos (ARPACK) on
+        M^-½ H M^-½, with H q from central differences of the shell's forces."""
+        from scipy.sparse.linalg import LinearOperator, eigsh
+
+        n = len(self.mass)
+        step = (1e-3 if self.scalar == wp.float32 else 1e-6) * self.shell.edge_length
+        x = self.x.numpy().astype(np.float64)
+        scale = np.repeat(1.0 / np.sqrt(self.mass), 3)
+        probe, forces = wp.empty_like(self.x), wp.empty_like(self.x)
+
+        def matvec(q):
+            q = scale * np.ravel(q)
+            size = np.abs(q).max() or 1.0
+            out = []
+            for sign in (1.0, -1.0):
+                probe.assign((x + (sign * step / size) * q.reshape(n, 3)).astype(self._real))
+                self.shell.forces_device(probe, forces)
+                out.append(forces.numpy().astype(np.float64).ravel())
+            return scale * (out[1] - out[0]) * (size / (2 * step))
+
+        start = np.random.default_rng(0).standard_normal(3 * n)
+        operator = LinearOperator((3 * n, 3 * n), matvec=matvec, dtype=np.float64)
+        eigenvalue = eigsh(operator, k=1, which="LA", tol=tol, v0=start, return_eigenvectors=False)[0]
+        return math.sqrt(max(float(eigenvalue), 1e-300))
+
+    # ---------------------------------------------------------------- stepping
+    def _external_forces(self) -> None:
+        """Gravity on the control points; contact and friction on the limit points, through Lᵀ."""
+        n, s = len(self.mass), self.scalar
+        if self.gravity > 0:
+            wp.launch(gravity_kernel, dim=n, inputs=[self._mass, s(self.gravity)], outputs=[self._forces])
+        if self.ground is None:
+            return
+        m = self.mask
+        for values, limit in ((self.x, self._limit_x), (self.v, self._limit_v)):
+            wp.launch(limit_positions_kernel, dim=n, inputs=[values, m.ring_start, m.ring, m.centre_weight,
+                                                              m.ring_weight], outputs=[limit])  # fmt: skip
+        g = self.ground
+        wp.launch(ground_contact_kernel, dim=n, inputs=[self._limit_x, self._limit_v, s(g.stiffness), s(g.damping)],
+                  outputs=[self._normal_force, self._limit_forces])  # fmt: skip
+        if g.friction > 0:
+            wp.launch(friction_kernel, dim=n, inputs=[self._limit_v, self._normal_force, s(g.friction), s(g.sharpness)],
+                      outputs=[self._limit_forces])  # fmt: skip
+        wp.launch(limit_transpose_kernel, dim=n, inputs=[self._limit_forces, m.ring_start, m.ring, m.centre_weight,
+                                                         m.ring_weight], outputs=[self._forces])  # fmt: skip
+
+    def _step(self) -> None:
+        n, s = len(self.mass), self.scalar
+        self.shell.forces_device(self.x, self._forces)
+        self._rigid_sums.zero_()
+        self._second_moment.zero_()
+        wp.launch(rigid_sums_kernel, dim=n, inputs=[self._forces, self._mass, self.x],
+                  outputs=[self._rigid_sums, self._second_moment])  # fmt: skip
+        wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment,
+                                                          s(1.0 / self.total_mass)], outputs=[self._rigid])  # fmt: skip
+        self._external_forces()
+        self._momentum.zero_()
+        if self.damping > 0:
+            wp.launch(momentum_kernel, dim=n, inputs=[self._mass, self.v], outputs=[self._momentum])
+        wp.launch(symplectic_euler_kernel, dim=n,
+                  inputs=[self._forces, self._inverse_mass, self._momentum, self._rigid, s(1.0 / self.total_mass),
+                          s(self.damping), s(self.dt)], outputs=[self.x, self.v])  # fmt: skip
+
+    def _run(self, steps: int) -> None:
+        with wp.ScopedDevice(self.device):
+            if not self.capture:
+                for _ in range(steps):
+                    self._step()
+                return
+            graph = self._graphs.get(steps)
+            if graph is None:
+                for module in (kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface):
+                    wp.load_module(module, device=self.device)
+                with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
+                    for _ in range(steps):
+                        self._step()
+                graph = self._graphs[steps] = capture.graph
+            wp.capture_launch(graph)
+
+    def advance(self, steps: int = 1):
+        """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""
+        steps = _count("steps", steps, 0)
+        done = 0
+        while done < steps:
+            chunk = min(self.check_every, steps - done)
+            for backup, a in zip(self._backups, (self.x, self.v)):
+                wp.copy(backup, a)
+            self._run(chunk)
+            self._flag.zero_()
+            wp.launch(speed_runaway_kernel, dim=len(self.mass), inputs=[self.v, self.scalar(self.speed_limit)],
+                      outputs=[self._flag], device=self.device)  # fmt: skip
+            if self._flag.numpy()[0]:
+                for backup, a in zip(self._backups, (self.x, self.v)):
+                    wp.copy(a, backup)
+                raise BlowUpError(
+                    f"{self.scheme} blew up between t = {self.time:.6g} and t = {self.time + chunk * self.dt:.6g} "
+                    f"(NaN/Inf or a speed past {self.speed_limit:.3g}) with dt = {self.dt:.6g} (stability bound "
+                    f"{self.stable_dt:.6g}); the state is restored to t = {self.time:.6g}. Reduce dt",
+                    self.time, self.steps,
+                )  # fmt: skip
+            done += chunk
+            self.steps += chunk
+            self.time += chunk * self.dt
+        return self
+
+    def run_until(self, time: float):
+        """Advance by whole steps to the first step at or after `time`; returns self."""
+        return self.advance(max(0, math.ceil((_finite("time", time) - self.time) / self.dt - 1e-9)))
+
+    # ---------------------------------------------------------------- state (NumPy)
+    def positions(self) -> np.ndarray:
+        return self.x.numpy().astype(np.float64)
+
+    def velocities(self) -> np.ndarray:
+        return self.v.numpy().astype(np.float64)
+
+    def center_of_mass(self) -> np.ndarray:
+        """Σ M_I x_I / Σ M_I: exactly the centre of mass of the density ρ on the surface."""
+        return self.mass @ self.positions() / self.total_mass
+
+    def momentum(self) -> np.ndarray:
+        return self.mass @ self.velocities()
+
+    def kinetic_energy(self) -> float:
+        return 0.5 * float(self.mass @ np.sum(self.velocities() ** 2, axis=1))
+
+    def external_forces(self) -> np.ndarray:
+        """(V, 3) gravity, contact and friction forces on the control points at the current state."""
+        with wp.ScopedDevice(self.device):
+            self._forces.zero_()
+            self._external_forces()
+        return self._forces.numpy().astype(np.float64)
+
+    def normal_forces(self) -> np.ndarray:
+        """(V,) ground normal force on each limit point at the current state."""
+        if self.ground is None:
+            return np.zeros(len(self.mass))
+        self.external_forces()
+        return self._normal_force.numpy().astype(np.float64)
