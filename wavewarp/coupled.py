@@ -16,10 +16,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .checks import count
 from .laplace import LaplaceBeltrami
 from .relax import relax
 from .shell import RelaxationError, Shell
-from .waves import _count, _Stepper
+from .waves import _Stepper
 
 ROUND_OFF_SLACK = 10.0
 
@@ -48,11 +49,11 @@ class QuasiStatic:
                              f"{op.scalar.__name__}) must share device and dtype")  # fmt: skip
         self.shell, self.wave, self.operator = shell, wave, op
         self.sensitive = bool(sensitive)
-        self.chemistry_steps = _count("chemistry_steps", chemistry_steps, 1)
+        self.chemistry_steps = count("chemistry_steps", chemistry_steps, 1)
         if tol is None:
             tol = 1e-5 if shell.scalar == wp.float32 else 1e-9
         self.tol = float(tol)
-        self.max_iterations = _count("max_iterations", max_iterations, 1)
+        self.max_iterations = count("max_iterations", max_iterations, 1)
         self.overdamped = bool(overdamped)
         self.unconverged = 0  # overdamped relaxations that used their whole iteration budget
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)

@@ -47,3 +47,22 @@ def vec6(scalar):
 
 def mat22(scalar):
     return wp.types.matrix((2, 2), scalar)
+
+
+def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool) -> None:
+    """Call `step()` `steps` times on `device`; with `capture`, as one CUDA graph cached in
+    `graphs` by step count (`modules`: every kernel module a step launches, loaded first)."""
+    with wp.ScopedDevice(device):
+        if not capture:
+            for _ in range(steps):
+                step()
+            return
+        graph = graphs.get(steps)
+        if graph is None:
+            for module in modules:
+                wp.load_module(module, device=device)
+            with wp.ScopedCapture(device=device, force_module_load=False) as scope:
+                for _ in range(steps):
+                    step()
+            graph = graphs[steps] = scope.graph
+        wp.capture_launch(graph)

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .checks import count, finite, positive
+from .device import run_steps
 from .geometry import LimitMask, checked_positions
 from .kernels import contact as kernels_contact
 from .kernels import dynamics as kernels_dynamics
@@ -41,7 +43,7 @@ from .kernels.dynamics import (
 from .kernels.limit_surface import limit_positions_kernel
 from .laplace import LaplaceBeltrami
 from .shell import Shell
-from .waves import BlowUpError, TimeStepError, _count, _finite, _positive
+from .waves import BlowUpError, TimeStepError
 
 
 @dataclass(frozen=True)
@@ -81,15 +83,15 @@ class ShellDynamics:
             raise ValueError(f"ground must be a wavewarp.dynamics.Ground or None, got {type(ground).__name__}")
         self.shell, self.ground = shell, ground
         self.device, self.scalar, self.vec3, self._real = shell.device, shell.scalar, shell.vec3, shell._real
-        self.density = _positive("density", density)
-        self.gravity = _finite("gravity", gravity)
-        self.damping = _finite("damping", damping)
+        self.density = positive("density", density)
+        self.gravity = finite("gravity", gravity)
+        self.damping = finite("damping", damping)
         if self.gravity < 0 or self.damping < 0:
             raise ValueError(f"gravity and damping must be >= 0, got gravity={gravity!r}, damping={damping!r}")
-        self.safety = _positive("safety", safety)
+        self.safety = positive("safety", safety)
         if self.safety > 1:
             raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
-        self.check_every = _count("check_every", check_every, 1)
+        self.check_every = count("check_every", check_every, 1)
         self.capture = bool(capture) and wp.get_device(self.device).is_cuda
         mesh = shell.mesh
         n = mesh.n_vertices
@@ -119,12 +121,13 @@ class ShellDynamics:
         shell.update_reference(wp.array(c.astype(self._real), dtype=self.scalar, device=self.device))
         self.time, self.steps = 0.0, 0
         self._graphs = {}
+        self.contact_damping = self._contact_damping()
         self.omega_max = self.largest_frequency()
         self.stable_dt = self._bound(self.omega_max)
         if dt is None:
             self.dt = self.safety * self.stable_dt
         else:
-            self.dt = _positive("dt", dt)
+            self.dt = positive("dt", dt)
             if check_dt and self.dt > self.stable_dt:
                 raise TimeStepError(
                     f"dt = {self.dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
@@ -133,10 +136,11 @@ class ShellDynamics:
                     f"dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), or dt=None"
                 )  # fmt: skip
         typical = self.gravity * 1e3 * self.dt * self.check_every + float(np.abs(v0).max()) + 1.0
-        self.speed_limit = _positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
+        self.speed_limit = positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
 
     # ---------------------------------------------------------------- stability bound
-    def _ground_damping(self) -> float:
+    def _contact_damping(self) -> float:
+        """η_ground = β max_J (Lᵀ1)_J / M_J: the contact damping per unit mass (mesh only)."""
         if self.ground is None:
             return 0.0
         m = self.mask
@@ -145,7 +149,7 @@ class ShellDynamics:
         return self.ground.damping * float(np.max(column_sums / self.mass))
 
     def _zeta(self, omega: float) -> float:
-        return (self.damping + self._ground_damping()) / (2 * omega)
+        return (self.damping + self.contact_damping) / (2 * omega)
 
     def _bound(self, omega: float) -> float:
         zeta = self._zeta(omega)
@@ -208,32 +212,20 @@ class ShellDynamics:
         wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment,
                                                           s(1.0 / self.total_mass)], outputs=[self._rigid])  # fmt: skip
         self._external_forces()
-        self._momentum.zero_()
         if self.damping > 0:
+            self._momentum.zero_()
             wp.launch(momentum_kernel, dim=n, inputs=[self._mass, self.v], outputs=[self._momentum])
         wp.launch(symplectic_euler_kernel, dim=n,
                   inputs=[self._forces, self._inverse_mass, self._momentum, self._rigid, s(1.0 / self.total_mass),
                           s(self.damping), s(self.dt)], outputs=[self.x, self.v])  # fmt: skip
 
     def _run(self, steps: int) -> None:
-        with wp.ScopedDevice(self.device):
-            if not self.capture:
-                for _ in range(steps):
-                    self._step()
-                return
-            graph = self._graphs.get(steps)
-            if graph is None:
-                for module in (kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface):
-                    wp.load_module(module, device=self.device)
-                with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
-                    for _ in range(steps):
-                        self._step()
-                graph = self._graphs[steps] = capture.graph
-            wp.capture_launch(graph)
+        run_steps(self._step, steps, device=self.device, graphs=self._graphs,
+                  modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface), capture=self.capture)  # fmt: skip
 
     def advance(self, steps: int = 1):
         """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""
-        steps = _count("steps", steps, 0)
+        steps = count("steps", steps, 0)
         done = 0
         while done < steps:
             chunk = min(self.check_every, steps - done)
@@ -259,7 +251,7 @@ class ShellDynamics:
 
     def run_until(self, time: float):
         """Advance by whole steps to the first step at or after `time`; returns self."""
-        return self.advance(max(0, math.ceil((_finite("time", time) - self.time) / self.dt - 1e-9)))
+        return self.advance(max(0, math.ceil((finite("time", time) - self.time) / self.dt - 1e-9)))
 
     # ---------------------------------------------------------------- state (NumPy)
     def positions(self) -> np.ndarray:

@@ -13,6 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
+from .checks import positive
 from .subdivision import limit_weight, loop_subdivide
 from .topology import Topology
 
@@ -263,7 +264,7 @@ def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True) -> Mes
     With `limit=True` (default) the control points are then placed so that their Loop limit
     points lie on the sphere; otherwise the control points themselves do.
     """
-    _check_positive("radius", radius)
+    positive("radius", radius)
     if int(level) != level or level < 0:
         raise ValueError(f"level must be a non-negative integer, got {level!r}")
     phi = (1.0 + 5.0**0.5) / 2.0
@@ -350,7 +351,7 @@ def cube(edge: float = 1.0, divisions: int = 4) -> Mesh:
     centres 8 and the midpoints of the cube's edges 4. With divisions >= 4 no triangle
     touches two extraordinary vertices.
     """
-    _check_positive("edge", edge)
+    positive("edge", edge)
     _check_even_divisions(divisions)
     h = 0.5 * edge
     parts = []
@@ -372,7 +373,7 @@ def prism(edge: float = 1.0, divisions: int = 4) -> Mesh:
     The equilateral caps are cut into divisions² equilateral triangles, the square sides as in
     `cube` (diagonals towards the face centre; `divisions` even). Corners have valence 5.
     """
-    _check_positive("edge", edge)
+    positive("edge", edge)
     _check_even_divisions(divisions)
     n = divisions
     angles = np.pi / 2 + 2 * np.pi * np.arange(3) / 3
@@ -406,11 +407,6 @@ def _triangle_cap(corners, n, flip):
                 triangles.append((index[i + 1, j], index[i + 1, j + 1], index[i, j + 1]))
     triangles = np.array(triangles)
     return np.array(points), triangles[:, ::-1] if flip else triangles
-
-
-def _check_positive(name, value):
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
 
 
 def _check_even_divisions(divisions):

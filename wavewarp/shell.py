@@ -18,6 +18,7 @@ import math
 import numpy as np
 import warp as wp
 
+from .checks import finite, positive
 from .device import mat22, numpy_dtype
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.shell import (
@@ -49,20 +50,6 @@ class RelaxationError(RuntimeError):
         self.round_off = round_off
 
 
-def _positive(name: str, value) -> float:
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return value
-
-
-def _finite(name: str, value) -> float:
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return value
-
-
 class Shell:
     """Active Koiter shell on the Loop limit surface of `mesh` (its vertices are the rest state).
 
@@ -78,13 +65,13 @@ class Shell:
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
-        self.thickness = _positive("thickness", thickness)
-        self.young = _positive("young", young)
-        self.poisson = _finite("poisson", poisson)
+        self.thickness = positive("thickness", thickness)
+        self.young = positive("young", young)
+        self.poisson = finite("poisson", poisson)
         if not -1.0 < self.poisson < 0.5:
             raise ValueError(f"poisson must lie in (-1, 0.5), got {poisson!r}")
-        self.AC, self.AI = _finite("AC", AC), _finite("AI", AI)
-        self.volume_penalty = _finite("volume_penalty", volume_penalty)
+        self.AC, self.AI = finite("AC", AC), finite("AI", AI)
+        self.volume_penalty = finite("volume_penalty", volume_penalty)
         if self.volume_penalty < 0:
             raise ValueError(f"volume_penalty must be >= 0, got {volume_penalty!r}")
         if model not in MODELS:
@@ -103,7 +90,7 @@ class Shell:
         self.rest_area = float(rest["area"].numpy().astype(np.float64).sum())
         if bilayer_radius is None:
             bilayer_radius = math.sqrt(self.rest_area / (4 * math.pi))
-        self.bilayer_radius = _positive("bilayer_radius", bilayer_radius)
+        self.bilayer_radius = positive("bilayer_radius", bilayer_radius)
         nu = self.poisson
         self._moduli = (
             self.young * self.thickness / (8 * (1 - nu**2)),
@@ -299,7 +286,7 @@ class Shell:
 
         if tol is None:
             tol = 1e-5 if self.scalar == wp.float32 else 1e-9
-        tol = _positive("tol", tol)
+        tol = positive("tol", tol)
         xw = self._set(x0, c)
         return relax(self, xw, tol, int(max_iterations), callback)
 

@@ -24,6 +24,8 @@ from abc import ABC, abstractmethod
 import numpy as np
 import warp as wp
 
+from .checks import count, finite, positive
+from .device import run_steps
 from .kernels import laplace as kernels_laplace
 from .kernels import waves as kernels_waves
 from .kernels.laplace import weighted_dot_kernel
@@ -60,26 +62,6 @@ class TimeStepError(ValueError):
     """A fixed dt exceeds the method's stability bound (at construction, or after the surface moved)."""
 
 
-def _positive(name: str, value) -> float:
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return value
-
-
-def _finite(name: str, value) -> float:
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return value
-
-
-def _count(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or int(value) != value or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
 class _Stepper(ABC):
     """Shared machinery: dt and its guard, graph capture, blow-up detection, time keeping."""
 
@@ -92,14 +74,14 @@ class _Stepper(ABC):
         self.operator = operator
         self.device, self.scalar = operator.device, operator.scalar
         self._real = np.float32 if self.scalar == wp.float32 else np.float64
-        self.safety = _positive("safety", safety)
+        self.safety = positive("safety", safety)
         if self.safety > 1:
             raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
-        self.mass_corrections = _count("mass_corrections", mass_corrections, 0)
+        self.mass_corrections = count("mass_corrections", mass_corrections, 0)
         self.check_dt = bool(check_dt)
-        self.check_every = _count("check_every", check_every, 1)
-        self._requested_dt = None if dt is None else _positive("dt", dt)
-        self._blowup_limit = None if blowup_limit is None else _positive("blowup_limit", blowup_limit)
+        self.check_every = count("check_every", check_every, 1)
+        self._requested_dt = None if dt is None else positive("dt", dt)
+        self._blowup_limit = None if blowup_limit is None else positive("blowup_limit", blowup_limit)
         self.capture = bool(capture)
         self.dt = None
         self.time = 0.0
@@ -169,19 +151,8 @@ class _Stepper(ABC):
         self.operator.inverse_mass_device(self._stiffness_c, self._acceleration, self.mass_corrections)
 
     def _run(self, steps: int) -> None:
-        if not self.capture:
-            for _ in range(steps):
-                self._step()
-            return
-        graph = self._graphs.get(steps)
-        if graph is None:
-            for module in (kernels_laplace, kernels_waves):  # all that a step launches
-                wp.load_module(module, device=self.device)
-            with wp.ScopedCapture(device=self.device, force_module_load=False) as capture:
-                for _ in range(steps):
-                    self._step()
-            graph = self._graphs[steps] = capture.graph
-        wp.capture_launch(graph)
+        run_steps(self._step, steps, device=self.device, graphs=self._graphs, modules=(kernels_laplace, kernels_waves),
+                  capture=self.capture)  # fmt: skip
 
     def _check_chunk(self) -> str | None:
         """Launch the runaway checks into self._flag; return a message for other failures."""
@@ -196,7 +167,7 @@ class _Stepper(ABC):
         Raises BlowUpError (state restored to the last good check) on NaN/Inf or values past
         `blowup_limit`, and ValueError when the surface moved and a fixed dt now exceeds the bound.
         """
-        steps = _count("steps", steps, 0)
+        steps = count("steps", steps, 0)
         self._refresh()
         if self._backups is None:
             self._backups = [wp.empty_like(a) for a in self._state()]
@@ -228,7 +199,7 @@ class _Stepper(ABC):
 
     def run_until(self, time: float):
         """Advance by whole steps to the first step at or after `time`; returns self."""
-        time = _finite("time", time)
+        time = finite("time", time)
         self._refresh()
         return self.advance(max(0, math.ceil((time - self.time) / self.dt - 1e-9)))
 
@@ -265,8 +236,8 @@ class Telegraph(_Stepper):
                  check_dt=True, check_every=100, blowup_limit=None, capture=True):  # fmt: skip
         super().__init__(operator, dt=dt, safety=safety, mass_corrections=mass_corrections, check_dt=check_dt,
                          check_every=check_every, blowup_limit=blowup_limit, capture=capture)  # fmt: skip
-        self.gamma = _positive("gamma", gamma)
-        self.alpha = _finite("alpha", alpha)
+        self.gamma = positive("gamma", gamma)
+        self.alpha = finite("alpha", alpha)
         if self.alpha < 0:
             raise ValueError(f"alpha must be >= 0 (a dissipation rate), got {alpha!r}")
         c0 = self._initial(c0, "c0")
@@ -335,9 +306,9 @@ class FitzHughNagumo(_Stepper):
             capture = False  # the CG loop needs conditional graph nodes (CUDA 12.4+) to be captured
         super().__init__(operator, dt=dt, safety=safety, mass_corrections=mass_corrections, check_dt=check_dt,
                          check_every=check_every, blowup_limit=blowup_limit, capture=capture)  # fmt: skip
-        self.gamma = _positive("gamma", gamma)
-        self.nu, self.kappa = _finite("nu", nu), _finite("kappa", kappa)
-        self.epsilon = _finite("epsilon", epsilon)
+        self.gamma = positive("gamma", gamma)
+        self.nu, self.kappa = finite("nu", nu), finite("kappa", kappa)
+        self.epsilon = finite("epsilon", epsilon)
         if self.epsilon < 0 or self.kappa < 0:
             raise ValueError(f"epsilon and kappa must be >= 0, got epsilon={epsilon!r}, kappa={kappa!r}")
         self.reaction_lipschitz = fhn_reaction_lipschitz(self.nu)
@@ -350,7 +321,7 @@ class FitzHughNagumo(_Stepper):
         if self.implicit:
             if tol is None:
                 tol = 1e-5 if self.scalar == wp.float32 else 1e-10
-            self._solver = _ShiftedMassSolver(operator, _positive("tol", tol), _count("max_cg_iterations", max_cg_iterations, 1))
+            self._solver = _ShiftedMassSolver(operator, positive("tol", tol), count("max_cg_iterations", max_cg_iterations, 1))
             self._rhs = wp.empty_like(self.c)
         self._refresh()
 
@@ -502,10 +473,10 @@ def gaussian_pulse(operator: LaplaceBeltrami, origin, sigma, *, gamma, amplitude
     (default: the radius of the sphere with the surface's area); σ is dimensionless (the
     paper's oocytes: σ² = 2/R² in its units). Values at `points()`, interpolated.
     """
-    sigma, gamma, amplitude = _positive("sigma", sigma), _positive("gamma", gamma), _finite("amplitude", amplitude)
+    sigma, gamma, amplitude = positive("sigma", sigma), positive("gamma", gamma), finite("amplitude", amplitude)
     if distance not in ("chord", "arc"):
         raise ValueError(f"distance must be 'chord' or 'arc', got {distance!r}")
-    R = math.sqrt(operator.area / (4 * math.pi)) if radius is None else _positive("radius", radius)
+    R = math.sqrt(operator.area / (4 * math.pi)) if radius is None else positive("radius", radius)
     chord = np.linalg.norm(operator.points() - _origin_point(operator, origin), axis=1)
     s = chord if distance == "chord" else 2 * R * np.arcsin(np.minimum(1.0, chord / (2 * R)))
     c = amplitude * np.exp(-((s / R) ** 2) / (2 * sigma**2))
@@ -523,7 +494,7 @@ def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=Non
     at the origin, so z ≥ 0 on a sphere); k (1/length) sets the front's steepness, δ (length)
     its height. n are `nodal_normals`. Values at `points()`, interpolated.
     """
-    k, delta, gamma = _positive("k", k), _positive("delta", delta), _positive("gamma", gamma)
+    k, delta, gamma = positive("k", k), positive("delta", delta), positive("gamma", gamma)
     p = _origin_point(operator, origin)
     normals = nodal_normals(operator)
     if axis is None:
