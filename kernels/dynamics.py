@@ -8,10 +8,14 @@ from . import declare_overloads
 
 
 @wp.kernel
-def momentum_kernel(mass: wp.array(dtype=Any), v: wp.array(dtype=Any), momentum: wp.array(dtype=Any)):
-    """momentum[0] += Σ M_I v_I (zeroed by the caller)."""
+def momentum_kernel(
+    mass: wp.array(dtype=Any), x: wp.array(dtype=Any), v: wp.array(dtype=Any), momentum: wp.array(dtype=Any)
+):
+    """momentum += [Σ M_I v_I, Σ M_I x_I × v_I] (zeroed by the caller)."""
     i = wp.tid()
-    wp.atomic_add(momentum, 0, mass[i] * v[i])
+    p = mass[i] * v[i]
+    wp.atomic_add(momentum, 0, p)
+    wp.atomic_add(momentum, 1, wp.cross(x[i], p))
 
 
 @wp.kernel
@@ -29,10 +33,11 @@ def rigid_sums_kernel(
 
 @wp.kernel
 def rigid_correction_kernel(
-    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any), inverse_total_mass: Any,
-    correction: wp.array(dtype=Any),
+    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any), momentum: wp.array(dtype=Any),
+    inverse_total_mass: Any, correction: wp.array(dtype=Any),
 ):  # fmt: skip
-    """The rigid-body acceleration of the net force N and torque τ: [N/ΣM, α = I⁻¹τ, centre c]."""
+    """The rigid-body acceleration of the net force N and torque τ and the rigid-body velocity of the
+    momentum P and angular momentum L: [N/ΣM, α = I⁻¹τ, centre c, v̄ = P/ΣM, Ω = I⁻¹(L - c × P)]."""
     total = type(inverse_total_mass)(1.0) / inverse_total_mass
     c = inverse_total_mass * sums[2]
     torque = sums[1] - wp.cross(c, sums[0])
@@ -41,30 +46,31 @@ def rigid_correction_kernel(
     correction[0] = inverse_total_mass * sums[0]
     correction[1] = wp.inverse(inertia) * torque
     correction[2] = c
+    correction[3] = inverse_total_mass * momentum[0]
+    correction[4] = wp.inverse(inertia) * (momentum[1] - wp.cross(c, momentum[0]))
 
 
 @wp.kernel
 def symplectic_euler_kernel(
     forces: wp.array(dtype=Any),
     inverse_mass: wp.array(dtype=Any),
-    momentum: wp.array(dtype=Any),
     rigid: wp.array(dtype=Any),
-    inverse_total_mass: Any,
     damping: Any,
     dt: Any,
     x: wp.array(dtype=Any),
     v: wp.array(dtype=Any),
 ):
-    """v += dt (F/M - a_rigid - η (v - v̄)), then x += dt v.
+    """v += dt (F/M - a_rigid - η (v - v_rigid)), then x += dt v.
 
     a_rigid = N/ΣM + α × (x - c) undoes the net force and torque of the internal forces' round-off
-    (zero in exact arithmetic; in float32 they would set a resting shell rolling); v̄ = P / ΣM,
-    so the damping keeps the momentum.
+    (zero in exact arithmetic; in float32 they would set a resting shell rolling); the damping acts
+    on the velocity relative to the rigid-body motion v_rigid = v̄ + Ω × (x - c), so it exerts no
+    net force and no torque (it keeps P and L, and lets a shell roll and slide freely).
     """
     i = wp.tid()
-    mean = inverse_total_mass * momentum[0]
-    accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], x[i] - rigid[2])
-    vi = v[i] + dt * (accel - damping * (v[i] - mean))
+    r = x[i] - rigid[2]
+    accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], r)
+    vi = v[i] + dt * (accel - damping * (v[i] - rigid[3] - wp.cross(rigid[4], r)))
     v[i] = vi
     x[i] = x[i] + dt * vi
 
@@ -77,11 +83,11 @@ def speed_runaway_kernel(v: wp.array(dtype=Any), limit: Any, flag: wp.array(dtyp
         flag[0] = 1
 
 
-declare_overloads(momentum_kernel, mass="scalar[]", v="vec3[]", momentum="vec3[]")
+declare_overloads(momentum_kernel, mass="scalar[]", x="vec3[]", v="vec3[]", momentum="vec3[]")
 declare_overloads(rigid_sums_kernel, forces="vec3[]", mass="scalar[]", x="vec3[]", sums="vec3[]",
                   second_moment="mat33[]")  # fmt: skip
-declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]", inverse_total_mass="scalar",
-                  correction="vec3[]")  # fmt: skip
-declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", momentum="vec3[]",
-                  rigid="vec3[]", inverse_total_mass="scalar", damping="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]", momentum="vec3[]",
+                  inverse_total_mass="scalar", correction="vec3[]")  # fmt: skip
+declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]", damping="scalar",
+                  dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(speed_runaway_kernel, v="vec3[]", limit="scalar")

@@ -4,6 +4,7 @@ import math
 
 from wavewarp.mesh import prism
 from wavewarp.scene import BOX_PARAMETERS, Param, box_wave_run
+from wavewarp.unfolding import prism_faces, prism_fronts
 
 NAME = "prism-waves"
 DESCRIPTION = "triangular prism wave guide, L = 20h: telegraph wave from the triangle-face centre, an edge or a vertex (Fig. 2)"
@@ -19,4 +20,5 @@ QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     del seed  # the box scenes are deterministic
-    return box_wave_run(NAME, p, prism, ORIGINS, mesh=mesh, device=device, report=report)
+    return box_wave_run(NAME, p, prism, ORIGINS, faces=prism_faces, fronts=prism_fronts, mesh=mesh, device=device,
+                        report=report)  # fmt: skip

@@ -75,7 +75,7 @@ def runs_away(run, steps=2000):
 def test_free_shell_conserves_momentum_and_angular_momentum(device, rng):
     """No ground, no gravity: internal forces (here driven by a random active reference) exert no net
     force or torque; symplectic Euler then keeps P exactly and L = Σ M x × v exactly (the torque
-    at x_n vanishes), and the relative-velocity damping keeps P."""
+    at x_n vanishes); the damping, relative to the rigid-body motion, keeps both."""
     mesh = icosphere(1.0, 2)
     shell = Shell(mesh, thickness=0.1, young=100.0, AC=0.3, AI=0.5, device=device, dtype="float64")
     c = rng.uniform(0, 1, mesh.n_vertices)
@@ -88,9 +88,8 @@ def test_free_shell_conserves_momentum_and_angular_momentum(device, rng):
         assert np.abs(run.positions() - mesh.vertices).max() > 1e-2  # it deformed
         scale = np.sum(run.mass) * np.abs(run.velocities()).max()
         assert np.abs(run.momentum() - p0).max() <= 1e-12 * scale
-        if damping == 0.0:
-            L = np.sum(run.mass[:, None] * np.cross(run.positions(), run.velocities()), axis=0)
-            assert np.abs(L - L0).max() <= 1e-11 * scale
+        L = np.sum(run.mass[:, None] * np.cross(run.positions(), run.velocities()), axis=0)
+        assert np.abs(L - L0).max() <= 1e-11 * scale
 
 
 def test_external_forces_match_the_formulas_on_the_limit_points(device, rng):
@@ -160,12 +159,14 @@ def test_sliding_block_decelerates_at_mu_g():
     assert -slope == pytest.approx(mu * g, rel=2e-3)
 
 
-@pytest.mark.parametrize("dtype, bound", [("float64", 1e-10), ("float32", 3e-3)])
+@pytest.mark.parametrize("dtype, bound", [("float64", 1e-12), ("float32", 1e-5)])
 def test_shell_at_rest_on_the_ground_stays_put(dtype, bound):
-    """No wave: after settling, the centre of mass moves less than `bound` R along the ground over
-    10⁴ steps (measured: 4e-13 in float64; 1.4e-3 in float32 with the internal forces' round-off
-    net force and torque removed, 4.9e-3 without: the ball rolled at ω R ≈ 0.01; docs/walkers.md)."""
-    run, _ = settle_on_ground(icosphere(1.0, 2), 1e5, until=25.0, dtype=dtype)
+    """No wave: a ball resting on a vertex (a 5-fold symmetric contact, an equilibrium) moves less
+    than `bound` R along the ground over 10⁴ steps after settling (measured 2e-15 in float64,
+    1.2e-7 in float32). Placed on an asymmetric spot it first rocks to an equilibrium, slowly: the
+    tanh friction is viscous at low speed, drag μ k_f g per unit mass (docs/walkers.md)."""
+    mesh = icosphere(1.0, 2)
+    run, _ = settle_on_ground(mesh.turned(mesh.vertices[0], [0.0, 0.0, -1.0]), 1e5, until=25.0, dtype=dtype)
     start = run.center_of_mass()
     run.advance(10000)
     drift = run.center_of_mass() - start

@@ -100,7 +100,8 @@ def _scene_run(args) -> int:
 
     mesh = load(args.mesh) if args.mesh else None
     run = module.build(p, mesh=mesh, device=args.device, seed=args.seed, report=report)
-    usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", field_range=run.field_range)
+    usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", field_range=run.field_range,
+                       ground_size=getattr(run, "ground_size", 0.0))  # fmt: skip
     h5 = None
     if args.h5:
         h5 = TrajectoryWriter(args.h5, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
@@ -154,6 +155,9 @@ def _scene_run(args) -> int:
                 run.record(run.time, frame)
                 done += 1
                 progress.update(done, run.time)
+            measured = run.measurements()
+            if h5 is not None:
+                h5.set_measurements(measured)
     except KeyboardInterrupt:
         interrupted = True
     finally:
@@ -167,7 +171,7 @@ def _scene_run(args) -> int:
     summary = {
         "scene": module.NAME, "device": str(run.shell.device), "steps": run.steps, "frames": usd.frames,
         "wall_time_s": time.perf_counter() - start, "outputs": outputs, "interrupted": interrupted,
-        "round_off_relaxations": run.coupled.round_off_stops, **run.measurements(),
+        **(run.measurements() if interrupted else measured),
     }  # fmt: skip
     if args.json:
         print(json.dumps(summary))
@@ -250,6 +254,20 @@ def _render(args) -> int:
     return 0
 
 
+def benchmark_names() -> list:
+    """The benchmarks installed as `wavewarp.benchmarks` (the repository's benchmarks/)."""
+    from wavewarp.benchmarks import NAMES
+
+    return list(NAMES)
+
+
+def _bench(args) -> int:
+    names = benchmark_names()
+    if args.name not in names:
+        raise ValueError(f"unknown benchmark {args.name!r}; valid: {', '.join(names)}")
+    return importlib.import_module(f"wavewarp.benchmarks.{args.name}").main(args.options)
+
+
 def surface_device(device):
     from .device import resolve_device
 
@@ -286,6 +304,10 @@ def main(argv=None) -> int:
     render.add_argument("--dtype", default="float32", choices=["float32", "float64"])
     render.add_argument("--json", action="store_true", help="print one JSON object with the results")
     render.set_defaults(run=_render)
+    bench = commands.add_parser("bench", help="a benchmark: wavewarp bench NAME [--quick] [--device D] [--out DIR] ...")
+    bench.add_argument("name", help=f"one of: {', '.join(benchmark_names())}")
+    bench.add_argument("options", nargs=argparse.REMAINDER, help="the benchmark's own options (wavewarp bench NAME -h)")
+    bench.set_defaults(run=_bench)
     args = parser.parse_args(argv)
     from .shell import RelaxationError
     from .waves import BlowUpError

@@ -1,6 +1,9 @@
-"""The quasi-static coupled stepper (SPEC §1, §3, §5): chemistry drives the shell, the shell steers the wave.
+"""Coupled steppers (SPEC §1, §3, §5): chemistry drives the shell, the shell steers the wave.
 
-One `step()`:
+`QuasiStatic` (oocytes, wave guides, buckling) relaxes the shell after each chemistry step;
+`Walking` (the walkers) advances inertial shell dynamics between chemistry steps.
+
+One `QuasiStatic.step()`:
 1. the wave advances `chemistry_steps` steps on the device (its own stability guard);
 2. the shell's active reference ā, b̄ follows the new control concentrations (device to device);
 3. `relax` finds the new quasi-static equilibrium, warm-started from the last one;
@@ -8,10 +11,12 @@ One `step()`:
    makes the wave re-check its time step; the insensitive twin keeps the rest surface.
 
 State (positions, the wave's c and its velocity or inhibitor), model (Shell, LaplaceBeltrami)
-and stepper stay apart: `QuasiStatic` only sequences them.
+and stepper stay apart: the coupled steppers only sequence them.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import warp as wp
@@ -97,4 +102,50 @@ class QuasiStatic:
         """Advance the wave `chemistry_steps` steps, then relax the shell to the new reference; returns self."""
         self.wave.advance(self.chemistry_steps)
         self._equilibrate()
+        return self
+
+
+class Walking:
+    """Couple a `wave` (FitzHughNagumo or Telegraph) to inertial shell `dynamics` (the walkers, SPEC §3, §4).
+
+    One `step()`, one chemistry step dt_c:
+    1. the wave advances one step (its own stability guard);
+    2. the shell's active reference follows the new c (device to device);
+    3. the mechanics advance `substeps` steps of dt_c / substeps (the largest divisor step within
+       the mechanics' bound), so both clocks stay equal;
+    4. deformation-sensitive runs move the wave's operator to the new positions; the insensitive
+       twin keeps the rest surface (M and K fixed).
+    """
+
+    def __init__(self, dynamics, wave: _Stepper, *, sensitive: bool = True):
+        from .dynamics import ShellDynamics
+
+        if not isinstance(dynamics, ShellDynamics):
+            raise ValueError(f"dynamics must be a wavewarp.ShellDynamics, got {type(dynamics).__name__}")
+        if not isinstance(wave, _Stepper):
+            raise ValueError(f"wave must be a Telegraph or FitzHughNagumo stepper, got {type(wave).__name__}")
+        shell, op = dynamics.shell, wave.operator
+        if not np.array_equal(op.mesh.triangles, shell.mesh.triangles):
+            raise ValueError("the shell and the wave's operator must share one mesh")
+        if op.device != shell.device or op.scalar != shell.scalar:
+            raise ValueError(f"the shell ({shell.device}, {shell.scalar.__name__}) and the wave ({op.device}, "
+                             f"{op.scalar.__name__}) must share device and dtype")  # fmt: skip
+        self.dynamics, self.wave, self.shell, self.operator = dynamics, wave, shell, op
+        self.sensitive = bool(sensitive)
+        wave.stable_dt  # noqa: B018 — fixes wave.dt (checked against the current surface)
+        self.substeps = math.ceil(wave.dt / dynamics.dt * (1 - 1e-12))
+        dynamics.set_time_step(wave.dt / self.substeps, dynamics.omega_max)
+        self.shell.update_reference(wave.c)
+
+    @property
+    def time(self) -> float:
+        return self.wave.time
+
+    def step(self):
+        """One chemistry step and the mechanics over it; returns self."""
+        self.wave.advance(1)
+        self.shell.update_reference(self.wave.c)
+        self.dynamics.advance(self.substeps)
+        if self.sensitive:
+            self.operator.update(self.dynamics.x)
         return self

@@ -1,13 +1,14 @@
 """Shell dynamics for the walkers (SPEC §3 "Walker scenes", §4; choice in docs/walkers.md).
 
-    M_I dv_I/dt = F_I(x) - M_I g ẑ + (Lᵀ f_ground)_I - η M_I (v_I - v̄),     dx_I/dt = v_I
+    M_I dv_I/dt = F_I(x) - M_I g ẑ + (Lᵀ f_ground)_I - η M_I (v_I - v_rigid),     dx_I/dt = v_I
 
 (the net force and torque of F, zero in exact arithmetic, are removed from F's round-off as a
 rigid-body acceleration: float32 shells would otherwise drift and roll), with the lumped mass M_I = ρ ∫ N_I dω̄⁰ (so Σ M_I x_I / Σ M_I is exactly the centre of mass of
 the surface density ρ), the internal forces F of `Shell`, gravity, the ground's contact and
 friction forces f_ground on the limit points p = L x (L the Loop limit mask), and an optional
-light damping η of the velocity relative to the mean velocity v̄ (internal vibrations only: it
-exerts no net force, so it can neither fake nor brake locomotion). Symplectic (semi-implicit)
+light damping η of the velocity relative to the rigid-body motion v_rigid = v̄ + Ω × (x - c) of
+the same momentum and angular momentum (internal vibrations only: it exerts no net force and no
+torque, so it can neither fake nor brake sliding or rolling). Symplectic (semi-implicit)
 Euler: v first, then x with the new v.
 
 Stability (guarded like the chemistry steppers): dt < 2/ω (√(1 + ζ²) - ζ), with ω² the largest
@@ -67,7 +68,7 @@ class ShellDynamics:
 
     density ρ (mass per reference area); c the control concentrations of the active reference
     (default 0; a coupled stepper updates it with `shell.update_reference`); gravity g (along -z; 0 for none); ground a `Ground` or
-    None; damping η ≥ 0 (relative to the mean velocity); dt None picks `safety` × the stability
+    None; damping η ≥ 0 (relative to the rigid-body motion); dt None picks `safety` × the stability
     bound, a fixed dt past it raises TimeStepError (check_dt=False lets it run: stability studies). Every `check_every` steps one flag is read:
     NaN/Inf or a speed past `speed_limit` raises BlowUpError with the state restored.
     """
@@ -107,10 +108,10 @@ class ShellDynamics:
             self._mass = wp.array(self.mass.astype(self._real), dtype=self.scalar)
             self._inverse_mass = wp.array((1.0 / self.mass).astype(self._real), dtype=self.scalar)
             self._forces = wp.zeros(n, dtype=self.vec3)
-            self._momentum = wp.zeros(1, dtype=self.vec3)
+            self._momentum = wp.zeros(2, dtype=self.vec3)
             self._rigid_sums = wp.zeros(3, dtype=self.vec3)
             self._second_moment = wp.zeros(1, dtype=wp.types.matrix((3, 3), self.scalar))
-            self._rigid = wp.zeros(3, dtype=self.vec3)
+            self._rigid = wp.zeros(5, dtype=self.vec3)
             self._limit_x = wp.zeros(n, dtype=self.vec3)
             self._limit_v = wp.zeros(n, dtype=self.vec3)
             self._limit_forces = wp.zeros(n, dtype=self.vec3)
@@ -120,21 +121,9 @@ class ShellDynamics:
         c = np.zeros(n) if c is None else shell.checked_concentrations(c)
         shell.update_reference(wp.array(c.astype(self._real), dtype=self.scalar, device=self.device))
         self.time, self.steps = 0.0, 0
-        self._graphs = {}
+        self._graphs, self.dt = {}, None
         self.contact_damping = self._contact_damping()
-        self.omega_max = self.largest_frequency()
-        self.stable_dt = self._bound(self.omega_max)
-        if dt is None:
-            self.dt = self.safety * self.stable_dt
-        else:
-            self.dt = positive("dt", dt)
-            if check_dt and self.dt > self.stable_dt:
-                raise TimeStepError(
-                    f"dt = {self.dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
-                    f"(dt < 2/ω (√(1+ζ²) - ζ), ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos, "
-                    f"ζ = {self._zeta(self.omega_max):.3g}): use dt <= {self.stable_dt:.6g}, e.g. "
-                    f"dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), or dt=None"
-                )  # fmt: skip
+        self.set_time_step(dt, self.largest_frequency(), check_dt)
         typical = self.gravity * 1e3 * self.dt * self.check_every + float(np.abs(v0).max()) + 1.0
         self.speed_limit = positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
 
@@ -154,6 +143,25 @@ class ShellDynamics:
     def _bound(self, omega: float) -> float:
         zeta = self._zeta(omega)
         return 2.0 / omega * (math.sqrt(1 + zeta**2) - zeta)
+
+    def set_time_step(self, dt, omega: float, check_dt: bool = True) -> None:
+        """Take ω as the largest frequency (e.g. the largest over the active references a coupled
+        run will visit), derive the bound, and set dt: None = `safety` × the bound; a fixed dt past
+        the bound raises TimeStepError unless `check_dt` is false."""
+        self.omega_max = positive("omega", omega)
+        self.stable_dt = self._bound(self.omega_max)
+        if dt is None:
+            dt = self.safety * self.stable_dt
+        elif positive("dt", dt) > self.stable_dt and check_dt:
+            raise TimeStepError(
+                f"dt = {dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
+                f"(dt < 2/ω (√(1+ζ²) - ζ), ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos, "
+                f"ζ = {self._zeta(self.omega_max):.3g}): use dt <= {self.stable_dt:.6g}, e.g. "
+                f"dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), or dt=None"
+            )  # fmt: skip
+        if dt != self.dt:
+            self.dt = float(dt)
+            self._graphs.clear()
 
     def largest_frequency(self, tol: float = 1e-6) -> float:
         """ω = √λ_max(M⁻¹H) at the current positions and reference: Lanczos (ARPACK) on
@@ -209,15 +217,16 @@ class ShellDynamics:
         self._second_moment.zero_()
         wp.launch(rigid_sums_kernel, dim=n, inputs=[self._forces, self._mass, self.x],
                   outputs=[self._rigid_sums, self._second_moment])  # fmt: skip
-        wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment,
-                                                          s(1.0 / self.total_mass)], outputs=[self._rigid])  # fmt: skip
-        self._external_forces()
         if self.damping > 0:
             self._momentum.zero_()
-            wp.launch(momentum_kernel, dim=n, inputs=[self._mass, self.v], outputs=[self._momentum])
+            wp.launch(momentum_kernel, dim=n, inputs=[self._mass, self.x, self.v], outputs=[self._momentum])
+        wp.launch(rigid_correction_kernel, dim=1,
+                  inputs=[self._rigid_sums, self._second_moment, self._momentum, s(1.0 / self.total_mass)],
+                  outputs=[self._rigid])  # fmt: skip
+        self._external_forces()
         wp.launch(symplectic_euler_kernel, dim=n,
-                  inputs=[self._forces, self._inverse_mass, self._momentum, self._rigid, s(1.0 / self.total_mass),
-                          s(self.damping), s(self.dt)], outputs=[self.x, self.v])  # fmt: skip
+                  inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.dt)],
+                  outputs=[self.x, self.v])  # fmt: skip
 
     def _run(self, steps: int) -> None:
         run_steps(self._step, steps, device=self.device, graphs=self._graphs,

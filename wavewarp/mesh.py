@@ -80,6 +80,18 @@ class Mesh:
         a, b, c = (p[self.triangles[:, k]] for k in range(3))
         return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
 
+    def turned(self, direction, target) -> Mesh:
+        """The mesh rotated rigidly about the origin so that `direction` points along `target`."""
+        a, b = (np.asarray(v, dtype=np.float64) / np.linalg.norm(v) for v in (direction, target))
+        if a @ b < -1 + 1e-12:  # opposite: a half turn about an axis perpendicular to a
+            u = np.cross(a, np.eye(3)[np.argmin(np.abs(a))])
+            rotation = 2 * np.outer(u, u) / (u @ u) - np.eye(3)
+        else:  # Rodrigues' formula about a × b
+            k = np.cross(a, b)
+            K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+            rotation = np.eye(3) + K + K @ K / (1 + a @ b)
+        return Mesh(self.vertices @ rotation.T, self.triangles)
+
     def subdivided(self, levels: int = 1) -> Mesh:
         """Loop subdivision of the control mesh, `levels` times (Loop's original β)."""
         if int(levels) != levels or levels < 0:

@@ -20,6 +20,7 @@ from .coupled import QuasiStatic
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh
 from .shell import Shell
+from .unfolding import first_arrival
 from .waves import Telegraph, gaussian_pulse, steady_front
 
 
@@ -141,7 +142,19 @@ def mean_edge(mesh: Mesh) -> float:
     return float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
 
 
-class QuasiStaticWaveRun:
+class WaveClock:
+    """A run's time and step count are its wave's."""
+
+    @property
+    def time(self) -> float:
+        return self.wave.time
+
+    @property
+    def steps(self) -> int:
+        return self.wave.steps
+
+
+class QuasiStaticWaveRun(WaveClock):
     """A telegraph wave on a quasi-static active shell: the oocyte, wave-guide and buckling scenes.
 
     `initial` is "gaussian" (origin, sigma) or "front" (origin, k, delta). Frames are written
@@ -183,14 +196,6 @@ class QuasiStaticWaveRun:
         self.snapshot = None  # (time, positions, c) of the frame nearest t_end / 3, for the rendered frame
         self.front_start = 0.0  # rest arc length of the wave front from the origin at t = 0
 
-    @property
-    def time(self) -> float:
-        return self.wave.time
-
-    @property
-    def steps(self) -> int:
-        return self.wave.steps
-
     def frame(self) -> dict:
         """The current frame: control positions, concentrations and the wave's rate c_t (control values)."""
         return {"positions": self.coupled.positions(), "concentration": self.wave.concentration(),
@@ -225,7 +230,8 @@ class QuasiStaticWaveRun:
         x = self.coupled.positions()
         out = {"time": self.time, "volume": self.shell.volume(x),
                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
-               "unconverged_relaxations": self.coupled.unconverged}  # fmt: skip
+               "unconverged_relaxations": self.coupled.unconverged,
+               "round_off_relaxations": self.coupled.round_off_stops}  # fmt: skip
         if self._measure is not None:
             out.update(self._measure(self))
         return out
@@ -378,23 +384,127 @@ def arrival_map_png(run, path) -> None:
     plt.close(fig)
 
 
-def box_wave_run(name: str, p: dict, make_box, origins: dict, *, mesh=None, device=None, report=print):
-    """A telegraph wave on a quasi-static box (cube or prism) from a face centre, an edge or a vertex."""
+def face_heights(x, corners: dict) -> np.ndarray:
+    """(faces, V) signed heights of points `x` above the planes of a convex box's faces (name ->
+    corners, counter-clockwise from outside): all ≤ 0 inside, the largest 0 on the surface."""
+    normals = [np.cross(c[1] - c[0], c[2] - c[0]) for c in corners.values()]
+    return np.array([(x - c[0]) @ (n / np.linalg.norm(n)) for c, n in zip(corners.values(), normals)])
+
+
+def face_grid(corners, n: int):
+    """An n × n grid over a planar face's bounding rectangle. Returns the in-plane axes (2, 3) (from
+    corners[0]), the grid's in-plane coordinates gu, gv (n, n), its points (n², 3) and which of them
+    lie inside the face (corners counter-clockwise)."""
+    u = (corners[1] - corners[0]) / np.linalg.norm(corners[1] - corners[0])
+    v = corners[2] - corners[0] - ((corners[2] - corners[0]) @ u) * u
+    axes = np.stack([u, v / np.linalg.norm(v)])
+    c = (corners - corners[0]) @ axes.T
+    gu, gv = np.meshgrid(*(np.linspace(low, high, n) for low, high in zip(c.min(axis=0), c.max(axis=0))))
+    inside = np.ones(n * n, dtype=bool)
+    for a, b in zip(c, np.roll(c, -1, axis=0)):  # the face lies left of each edge
+        inside &= (b[0] - a[0]) * (gv.ravel() - a[1]) - (b[1] - a[1]) * (gu.ravel() - a[0]) > 1e-9 * np.ptp(c)
+    return axes, gu, gv, corners[0] + np.stack([gu.ravel(), gv.ravel()], axis=1) @ axes, inside
+
+
+def opposite_face(run, faces, fronts):
+    """The face where the wave ends, holding the surface point farthest from the origin (on a
+    61 × 61 grid per face). Returns its name, its corners and the mask of the mesh's vertices on it."""
+    corners = faces(run.size)
+
+    def farthest(name):
+        _, _, _, points, inside = face_grid(corners[name], 61)
+        return first_arrival(fronts(points[inside], run.origin, run.size, face=name))[0].max()
+
+    name = max(corners, key=farthest)
+    on = np.abs(face_heights(run.mesh.vertices, {name: corners[name]})[0]) < 1e-9 * run.size
+    return name, corners[name], on
+
+
+def imprint_measurements(run, faces, fronts) -> dict:
+    """The imprint on the face opposite the origin (SPEC §7, Fig. 2): `imprint_fold`, how many fronts
+    (unfolded images of the origin) of the exact geodesic field arrive first somewhere on its
+    vertices; `imprint_deviation`, the largest |arrival − (d/γ + fitted offset)| there in
+    control-edge crossing times, d the exact distance; the same for the straight chord and, per
+    front, for the exact field without that front (`imprint_without_front`), which must fit worse."""
+    name, _, on = opposite_face(run, faces, fronts)
+    x, arrival = run.mesh.vertices[on], run.arrival.time[on]
+    each = fronts(x, run.origin, run.size, face=name)
+    distance, first = first_arrival(each)
+    out = {"imprint_face": name, "imprint_fold": len(np.unique(first)), "imprint_deviation": None,
+           "imprint_chord_deviation": None, "imprint_without_front": None}  # fmt: skip
+    if np.any(arrival <= 0):  # the wave has not crossed the whole face yet
+        return out
+    edge_time = mean_edge(run.mesh) / run.p["gamma"]
+
+    def deviation(d):
+        residual = arrival - d / run.p["gamma"]
+        return float(np.abs(residual - residual.mean()).max() / edge_time)
+
+    without = {f: deviation(np.min([each[g] for g in each if g != f], axis=0)) for f in np.unique(first)}
+    return {**out, "imprint_deviation": deviation(distance),
+            "imprint_chord_deviation": deviation(np.linalg.norm(x - run.origin, axis=1)),
+            "imprint_without_front": without}  # fmt: skip
+
+
+def imprint_png(run, path, faces, fronts) -> None:
+    """Arrival times on the face opposite the origin, with the borders of the exact first-arrival regions."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_path
+
+    name, corners, on = opposite_face(run, faces, fronts)
+    axes, gu, gv, points, inside = face_grid(corners, 160)  # even: no sample on a mirror line, where fronts tie
+    plane = (run.mesh.vertices - corners[0]) @ axes.T
+    arrival, triangles = run.arrival.time, run.mesh.triangles
+    fig, ax = plt.subplots(figsize=(5.5, 5))
+    shown = on[triangles].all(axis=1) & (arrival[triangles] > 0).all(axis=1)
+    if shown.any():
+        reached = arrival[on & (arrival > 0)]
+        filled = ax.tripcolor(plane[:, 0], plane[:, 1], triangles[shown], arrival, shading="gouraud",
+                              vmin=reached.min(), vmax=reached.max())  # fmt: skip
+        fig.colorbar(filled, label="arrival time (half the first peak of c)")
+    first = np.full(len(points), "", dtype=object)
+    first[inside] = first_arrival(fronts(points[inside], run.origin, run.size, face=name))[1]
+    for front in np.unique(first[inside]):
+        ax.contour(gu, gv, np.where(inside, first == front, np.nan).astype(float).reshape(gu.shape), levels=[0.5],
+                   colors="w", linewidths=1.2)  # fmt: skip
+    ax.set_aspect("equal")
+    ax.set_title(f"{run.name} from the {run.p.get('origin', 'origin')}: arrival on the {name} face\n"
+                 f"white: the {len(np.unique(first[inside]))} exact first-arrival regions", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+
+
+def box_wave_run(name: str, p: dict, make_box, origins: dict, *, faces=None, fronts=None, mesh=None, device=None,
+                 report=print):  # fmt: skip
+    """A telegraph wave on a quasi-static box (cube or prism) from a face centre, an edge or a vertex.
+    With the box's `faces` and exact `fronts` (wavewarp.unfolding) the run also measures and draws
+    the imprint on the face opposite the origin (`imprint_measurements`, `imprint_png`)."""
     L = p["edge"]
     divisions = p["divisions"] + p["divisions"] % 2
     mesh = scene_mesh(mesh, lambda: make_box(L, divisions), report)
     origin = np.asarray(origins[p["origin"]], dtype=np.float64) * L
     initial = {"kind": "gaussian", "sigma": p["width"] / L}
+    measure, figures = box_wave_measurements, {"arrival": arrival_map_png}
+    on_box = fronts is not None and np.all(np.abs(face_heights(mesh.vertices, faces(L)).max(axis=0)) < 1e-9 * L)
+    if on_box:  # not a --mesh of another shape
+        measure = lambda run: {**box_wave_measurements(run), **imprint_measurements(run, faces, fronts)}
+        figures["imprint"] = lambda run, path: imprint_png(run, path, faces, fronts)
     return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p["t_end"] or 2 * L / p["gamma"],
-                              rule=p["rule"], device=device, measure=box_wave_measurements,
-                              figures={"arrival": arrival_map_png})  # fmt: skip
+                              rule=p["rule"], device=device, measure=measure, figures=figures)  # fmt: skip
 
 
 class ArrivalTimes:
-    """Per vertex, when the pulse arrived: the first crossing of half the vertex's largest control
-    concentration, interpolated between the samples taken at every relaxation (as the arrival
-    checks of tests/test_waves.py). `time` is 0 where the pulse has not (clearly) arrived: a
-    maximum below 1% of the initial peak, or still rising at the last sample."""
+    """Per vertex, when the first front arrived: the first crossing of half its first peak (the
+    first local maximum of the vertex's control concentration above 1% of the initial peak; the
+    larger peaks where fronts cross later do not count), interpolated between the samples taken
+    at every relaxation (as the arrival checks of tests/test_waves.py). `time` is 0 where no front
+    has (clearly) arrived: no such peak before the last sample, or c was above half of it at t = 0."""
 
     def __init__(self, c0: np.ndarray):
         self._times, self._values = [0.0], [np.asarray(c0, dtype=np.float64).copy()]
@@ -406,11 +516,12 @@ class ArrivalTimes:
     @property
     def time(self) -> np.ndarray:
         values, times = np.array(self._values), np.array(self._times)
-        peak = values.max(axis=0)
-        valid = (peak > 0.01 * values[0].max()) & (values.argmax(axis=0) < len(times) - 1) & (values[0] < 0.5 * peak)
-        j = np.argmax(values >= 0.5 * peak, axis=0)
-        j = np.maximum(j, 1)
+        falls = (values[:-1] >= values[1:]) & (values[:-1] > 0.01 * values[0].max())
+        falls[:1] = False  # falling from t = 0 is the initial pulse, not an arrival
         columns = np.arange(values.shape[1])
+        peak = values[np.argmax(falls, axis=0), columns]
+        valid = falls.any(axis=0) & (values[0] < 0.5 * peak)
+        j = np.maximum(np.argmax(values >= 0.5 * peak, axis=0), 1)
         before, after = values[j - 1, columns], values[j, columns]
         fraction = np.clip((0.5 * peak - before) / np.where(after > before, after - before, 1.0), 0.0, 1.0)
         arrival = times[j - 1] + fraction * (times[j] - times[j - 1])

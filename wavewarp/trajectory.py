@@ -2,8 +2,11 @@
 
 Schema: `/mesh/triangles` (T, 3), `/mesh/rest_positions` (V, 3); `/frames/time` (F,),
 `/frames/positions` (F, V, 3), `/frames/concentration` (F, V) and any further per-vertex
-series a scene records (`velocities` (F, V, 3), `inhibitor` (F, V), ...); root attributes
-`scene`, `parameters` (JSON), `wavewarp_version`, `device`.
+series a scene records (`velocities` (F, V, 3), `inhibitor` (F, V), the walkers' `trace`
+(F, k, 5): time, c at the origin and centre of mass at the k chemistry steps up to each frame);
+root attributes `scene`, `parameters` (JSON), `wavewarp_version`, `device`, and at the end of a
+run `measurements` (JSON) plus each numeric measurement under its own name (walkers: `period`,
+`distance_R`, `speed_R_per_T`, ...).
 
 Frames go to a temporary sibling that replaces the target when the writer closes, also after
 Ctrl-C (the frames so far are kept); any other error removes it and leaves the target as it
@@ -109,6 +112,15 @@ class TrajectoryWriter:
             dataset[n - 1] = array
         self.file.flush()
         self.frames = n
+
+    def set_measurements(self, measured: dict) -> None:
+        """Root attributes: `measurements` (JSON) and each numeric measurement by name."""
+        self.file.attrs["measurements"] = json.dumps(measured, sort_keys=True)
+        for name, value in measured.items():
+            if isinstance(value, (bool, int, float)) or (isinstance(value, list) and value and all(
+                    isinstance(v, (int, float)) for v in value)):  # fmt: skip
+                self.file.attrs[name] = value
+        self.file.flush()
 
     def __exit__(self, kind, error, trace) -> bool:
         self.file.close()

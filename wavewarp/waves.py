@@ -282,6 +282,27 @@ def fhn_reaction_lipschitz(nu: float) -> float:
     return max(abs(-3 * c * c + 2 * (1 + nu) * c - nu) for c in candidates)
 
 
+def fhn_kinetic_period(nu=-0.01, kappa=1e-4, epsilon=0.005) -> float:
+    """The limit-cycle period of the FHN kinetics without diffusion, ċ = c(1-c)(c-ν) - w,
+    ẇ = ε(c - κw) (SPEC §5; ν < 0: the rest state is an unstable focus and the medium
+    oscillates). The mean of the last cycles of an adaptive Runge–Kutta solve from c = 0.1;
+    SPEC values: 275.7. Raises ValueError when the kinetics do not oscillate."""
+    from scipy.integrate import solve_ivp
+
+    def rates(_, y):
+        c, w = y
+        return [c * (1 - c) * (c - nu) - w, epsilon * (c - kappa * w)]
+
+    horizon = 60.0 / max(epsilon, 1e-6)
+    solution = solve_ivp(rates, (0.0, horizon), [0.1, 0.0], max_step=0.5, rtol=1e-9, atol=1e-12)
+    c, t = solution.y[0], solution.t
+    rising = (c[:-1] < 0.5) & (c[1:] >= 0.5)
+    crossings = t[:-1][rising] + (0.5 - c[:-1][rising]) / (c[1:][rising] - c[:-1][rising]) * np.diff(t)[rising]
+    if len(crossings) < 4:
+        raise ValueError(f"the FHN kinetics (ν={nu}, κ={kappa}, ε={epsilon}) do not oscillate: no period")
+    return float(np.mean(np.diff(crossings[len(crossings) // 2:])))
+
+
 class FitzHughNagumo(_Stepper):
     """`c_t = γ² Δ_LB c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (SPEC §5; reaction on control values).
 

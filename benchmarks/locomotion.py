@@ -1,0 +1,89 @@
+"""Locomotion benchmark (issue 6; paper Fig. 3a): how fast the walkers walk, sensitive against insensitive.
+
+    wavewarp bench locomotion --device cuda --out benchmarks/results [--quick] [--periods N] [--set NAME=VALUE]
+
+Runs the sphere and prism walkers, each deformation-sensitive and -insensitive (the twin whose
+wave runs on the rest shell), over `--periods` FHN periods (default 6) at the scenes' defaults
+(`--set` overrides apply to every run). Writes locomotion.json: the device, the date and a list of runs
+with `scene`, `sensitive`, `period` (T, measured), `speed_R_per_T`, `distance_R`,
+`pulse_displacements_R`, `pulse_alignment`, `lateral_R`, `sag_R`, the resolved parameters and
+the wall time; and locomotion.png, the forward displacement in R against t/T (Fig. 3a: sensitive
+solid, insensitive dashed). `--quick`: coarse meshes over 2.2 periods (a CPU smoke run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from datetime import date
+
+SCENES = ("sphere-walker", "prism-walker")
+QUICK = {"sphere-walker": ["level=2"], "prism-walker": ["divisions=4"]}
+
+
+def run_walker(scene: str, sensitive: bool, *, device, periods: float, overrides=()) -> tuple:
+    """One walker run through the scene API; returns (summary, trace)."""
+    from wavewarp.scene import load_scene, resolve
+
+    module = load_scene(scene)
+    p = resolve(module.PARAMETERS, None, [*overrides, f"sensitive={str(sensitive).lower()}", f"periods={periods}"])
+    start = time.perf_counter()
+    run = module.build(p, device=device, report=lambda message: None)
+    run.record(run.time, run.frame())
+    for _ in range(run.frames):
+        run.advance_frame()
+        run.record(run.time, run.frame())
+    summary = {"scene": scene, "sensitive": sensitive, **run.measurements(), "wall_time_s": time.perf_counter() - start,
+               "parameters": run.resolved}  # fmt: skip
+    return summary, run
+
+
+def main(argv=None) -> int:
+    import warp as wp
+
+    from wavewarp.device import resolve_device
+    from wavewarp.io import atomic_path
+    from wavewarp.walker import locomotion_png
+
+    parser = argparse.ArgumentParser(prog="wavewarp bench locomotion", description=__doc__.split("\n")[0])
+    parser.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
+    parser.add_argument("--out", default=".", help="folder for locomotion.json and locomotion.png")
+    parser.add_argument("--periods", type=float, default=None, help="run length in FHN periods (default 6; --quick 2.2)")
+    parser.add_argument("--quick", action="store_true", help="coarse meshes over 2.2 periods (a CPU smoke run)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override for every run")
+    args = parser.parse_args(argv)
+    wp.config.log_level = wp.LOG_WARNING
+    device = resolve_device(args.device)
+    periods = args.periods or (2.2 if args.quick else 6.0)
+    os.makedirs(args.out, exist_ok=True)
+    runs, lines = [], []
+    for scene in SCENES:
+        for sensitive in (True, False):
+            overrides = (QUICK[scene] if args.quick else []) + args.set
+            summary, run = run_walker(scene, sensitive, device=str(device), periods=periods, overrides=overrides)
+            runs.append(summary)
+            lines.append((scene, sensitive, run.trace, run.forward, run.radius))
+            speed = summary["speed_R_per_T"]
+            print(f"{scene:14s} {'sensitive' if sensitive else 'insensitive':11s} T = {summary['period'] or float('nan'):7.2f}"
+                  f"  speed = {speed if speed is not None else float('nan'):+.4f} R/T  distance = {summary['distance_R']:+.4f} R"
+                  f"  ({summary['wall_time_s']:.1f} s)", flush=True)  # fmt: skip
+    for scene in SCENES:
+        pair = {r["sensitive"]: r["speed_R_per_T"] for r in runs if r["scene"] == scene}
+        if pair.get(True) and pair.get(False) is not None:
+            print(f"{scene}: insensitive / sensitive speed = {pair[False] / pair[True]:.3f}")
+    result = {"benchmark": "locomotion", "device": str(device), "device_name": wp.get_device(device).name,
+              "host": platform.node(), "date": date.today().isoformat(), "quick": args.quick, "periods": periods,
+              "runs": runs}  # fmt: skip
+    with atomic_path(os.path.join(args.out, "locomotion.json")) as tmp, open(tmp, "w") as f:
+        json.dump(result, f, indent=1)
+    locomotion_png(lines, os.path.join(args.out, "locomotion.png"),
+                   title=f"walkers, {wp.get_device(device).name}: displacement against time (Fig. 3a)")  # fmt: skip
+    print(f"wrote {os.path.join(args.out, 'locomotion.json')} and locomotion.png")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,159 @@
+"""Walker scenes (SPEC §6, §7 Fig. 3a; issue 6): FHN waves drive shells over the ground.
+
+Quick runs on coarse meshes (level-2 sphere, 4-division prism) keep these to seconds per period
+on a 2-core CPU; the full runs are `wavewarp bench locomotion` (BENCHMARKS in docs/walkers.md)."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from wavewarp.cli import main
+from wavewarp.scene import load_scene, resolve
+
+
+def run_cli(capsys, *argv):
+    code = main(["run", *argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def kinetic_period_by_euler(nu=-0.01, kappa=1e-4, epsilon=0.005, dt=0.01, t_end=2500.0):
+    """The FHN limit-cycle period by forward Euler at a small step (independent of the code's RK solve)."""
+    c, w, t, previous, crossings = 0.1, 0.0, 0.0, 0.1, []
+    while t < t_end:
+        c, w = c + dt * (c * (1 - c) * (c - nu) - w), w + dt * epsilon * (c - kappa * w)
+        t += dt
+        if previous < 0.5 <= c:
+            crossings.append(t)
+        previous = c
+    return float(np.mean(np.diff(crossings[-4:])))
+
+
+def walk(scene, **overrides):
+    """A walker run through the scene API; returns the run after all its frames."""
+    module = load_scene(scene)
+    p = resolve(module.PARAMETERS, module.QUICK, [f"{k}={v}" for k, v in overrides.items()])
+    run = module.build(p, device="cpu", report=lambda message: None)
+    run.record(run.time, run.frame())
+    for _ in range(run.frames):
+        run.advance_frame()
+        run.record(run.time, run.frame())
+    return run
+
+
+def test_sphere_walker_quick_run_writes_the_walker_outputs(tmp_path, capsys):
+    """SPEC §9: velocities and inhibitor frames, /World/Ground, the locomotion measurements in
+    --json and the HDF5 attributes; the measured period is the FHN kinetics' own (the origin is the
+    pacemaker: its oscillation is the limit cycle), computed here independently."""
+    from pxr import Usd, UsdGeom
+
+    out, h5 = tmp_path / "walk.usda", tmp_path / "walk.h5"
+    code, stdout, err = run_cli(capsys, "sphere-walker", "--quick", "--device", "cpu", "--out", str(out), "--h5", str(h5),
+                                "--json")  # fmt: skip
+    assert code == 0, err
+    result = json.loads(stdout)
+    assert result["period"] == pytest.approx(kinetic_period_by_euler(), rel=0.01)
+    assert result["speed_R_per_T"] is not None and abs(result["lateral_R"]) < 1e-3 * abs(result["distance_R"])
+    assert 0.005 < result["sag_R"] < 0.05  # a few % of R (docs/walkers.md)
+    assert any(path.endswith("_locomotion.png") for path in result["outputs"])
+    stage = Usd.Stage.Open(str(out))
+    assert UsdGeom.Mesh(stage.GetPrimAtPath("/World/Ground")).GetPointsAttr().Get() is not None
+    with h5py.File(h5) as f:
+        frames = result["frames"]
+        assert f["frames/velocities"].shape[:2] == (frames, f["frames/positions"].shape[1])
+        assert f["frames/inhibitor"].shape == f["frames/concentration"].shape
+        assert f.attrs["period"] == pytest.approx(result["period"])
+        assert f.attrs["speed_R_per_T"] == pytest.approx(result["speed_R_per_T"])
+        assert json.loads(f.attrs["measurements"])["distance_R"] == pytest.approx(result["distance_R"])
+        moved = f["frames/positions"][-1] - f["frames/positions"][0]
+        assert np.abs(moved[:, 0]).max() > 0.1 * 25  # the walker moved
+
+
+def test_resumed_walker_continues_the_same_trajectory(tmp_path, capsys):
+    """A walker resumed from its HDF5 file (positions, velocities, c, w) ends where the uninterrupted run does."""
+    whole, part = tmp_path / "whole.h5", tmp_path / "part.h5"
+    options = ["--set", "periods=0.4", "--set", "frames=4", "--set", "dtype=float64", "--device", "cpu", "--quick"]
+    assert run_cli(capsys, "sphere-walker", *options, "--out", str(tmp_path / "a.usda"), "--h5", str(whole))[0] == 0
+    short = [o.replace("frames=4", "frames=2").replace("periods=0.4", "periods=0.2") for o in options]
+    assert run_cli(capsys, "sphere-walker", *short, "--out", str(tmp_path / "b.usda"), "--h5", str(part))[0] == 0
+    with h5py.File(part, "r+") as f:  # continue the half-length run to the full length
+        parameters = json.loads(f.attrs["parameters"])
+        parameters.update(periods=0.4, frames=4)
+        f.attrs["parameters"] = json.dumps(parameters)
+    code, _, err = run_cli(capsys, "sphere-walker", "--resume", "--h5", str(part), "--device", "cpu", "--out",
+                           str(tmp_path / "c.usda"))  # fmt: skip
+    assert code == 0, err
+    with h5py.File(whole) as a, h5py.File(part) as b:
+        assert b["frames/time"].shape == a["frames/time"].shape
+        assert np.abs(b["frames/positions"][-1] - a["frames/positions"][-1]).max() < 1e-9 * 25
+        assert np.abs(b["frames/trace"][-1] - a["frames/trace"][-1]).max() < 1e-9 * 25
+
+
+@pytest.mark.parametrize("scene", ["sphere-walker", "prism-walker"])
+def test_mirrored_origin_mirrors_the_walk(scene):
+    """The meshes are mirror-symmetric in x (and in y, the plane holding the origin): started at
+    the mirror image of the origin, the centre of mass follows the mirror image of its path, and
+    neither run drifts sideways (float64: the symmetry holds to round-off)."""
+    runs = [walk(scene, periods=0.6, frames=3, dtype="float64", mirror=mirror) for mirror in (False, True)]
+    com = [run.trace[:, 2:5] - run.trace[0, 2:5] for run in runs]
+    assert np.abs(com[0][:, 0]).max() > 1e-3 * runs[0].radius  # it moved
+    scale = np.abs(com[0]).max()
+    assert np.abs(com[1] - com[0] * [-1.0, 1.0, 1.0]).max() < 1e-6 * scale
+    assert np.abs(com[0][:, 1]).max() < 1e-8 * scale
+
+
+def test_insensitive_twin_keeps_the_rest_surface():
+    """`sensitive=false`: the wave's operator stays on the rest shell (its mass is the rest one),
+    while the sensitive run's follows the shell (its mass moves off the rest one)."""
+    from wavewarp.laplace import LaplaceBeltrami
+
+    masses = {}
+    for sensitive in (True, False):
+        run = walk("sphere-walker", periods=0.1, frames=1, sensitive=sensitive)
+        rest = LaplaceBeltrami(run.mesh, device="cpu", dtype=run.p["dtype"]).mass()
+        masses[sensitive] = np.abs(run.operator.mass() - rest).max() / rest.max()
+    assert masses[False] == 0.0
+    assert masses[True] > 1e-3
+
+
+def test_bench_locomotion_quick_writes_json_and_chart(tmp_path):
+    from wavewarp.cli import main as cli
+
+    code = cli(["bench", "locomotion", "--quick", "--device", "cpu", "--out", str(tmp_path), "--periods", "0.3"])
+    assert code == 0
+    result = json.loads((tmp_path / "locomotion.json").read_text())
+    assert {(r["scene"], r["sensitive"]) for r in result["runs"]} == {
+        (s, b) for s in ("sphere-walker", "prism-walker") for b in (True, False)}  # fmt: skip
+    assert all({"period", "speed_R_per_T"} <= set(r) for r in result["runs"]) and result["device"] == "cpu"
+    assert (tmp_path / "locomotion.png").stat().st_size > 10_000
+
+
+def test_walker_on_cuda_follows_the_cpu_run():
+    """The CUDA path (graph-captured mechanics) walks the same path as the CPU in float64."""
+    import warp as wp
+
+    if not wp.is_cuda_available():
+        pytest.skip("no CUDA device")
+    module = load_scene("sphere-walker")
+    p = resolve(module.PARAMETERS, module.QUICK, ["periods=0.3", "frames=1", "dtype=float64"])
+    traces = []
+    for device in ("cpu", "cuda:0"):
+        run = module.build(p, device=device, report=lambda message: None)
+        run.record(run.time, run.frame())
+        run.advance_frame()
+        run.record(run.time, run.frame())
+        traces.append(run.trace)
+    assert np.abs(traces[1] - traces[0]).max() < 1e-6 * 25
+
+
+@pytest.mark.parametrize("scene", ["prism-walker", "cube-walker", "bilayer-walker"])
+def test_every_walker_runs_quick(scene, tmp_path, capsys):
+    """Each walker scene runs through the CLI (a shortened --quick) and moves its shell."""
+    code, stdout, err = run_cli(capsys, scene, "--quick", "--device", "cpu", "--set", "periods=0.3", "--out",
+                                str(tmp_path / "w.usda"), "--json")  # fmt: skip
+    assert code == 0, err
+    result = json.loads(stdout)
+    assert result["scene"] == scene and result["frames"] == 5
+    assert np.linalg.norm(result["displacement"]) > 0 and abs(result["lateral_R"]) < 0.1 * abs(result["distance_R"])
