@@ -132,7 +132,8 @@ class Walking:
                              f"{op.scalar.__name__}) must share device and dtype")  # fmt: skip
         self.dynamics, self.wave, self.shell, self.operator = dynamics, wave, shell, op
         self.sensitive = bool(sensitive)
-        wave.stable_dt  # noqa: B018 — fixes wave.dt (checked against the current surface)
+        if not wave.fixed_dt:  # an automatic dt follows the moving surface: the clocks would part
+            raise ValueError("Walking needs a wave with a fixed dt (the mechanics step divides it)")
         self.substeps = math.ceil(wave.dt / dynamics.dt * (1 - 1e-12))
         dynamics.set_time_step(wave.dt / self.substeps, dynamics.omega_max)
         self.shell.update_reference(wave.c)

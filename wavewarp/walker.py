@@ -208,6 +208,11 @@ def upward_crossings(t: np.ndarray, c: np.ndarray, level: float = 0.5) -> np.nda
     return t[k] + (level - c[k]) / (c[k + 1] - c[k]) * (t[k + 1] - t[k])
 
 
+def measured_period(crossings: np.ndarray) -> float | None:
+    """T: the mean interval between crossings (None with fewer than two)."""
+    return float(np.mean(np.diff(crossings))) if len(crossings) >= 2 else None
+
+
 def locomotion(trace: np.ndarray, forward, radius: float, rest_height: float, period_kinetic: float) -> dict:
     """Period, displacement and speed from a trace (rows: t, c at the origin, centre of mass, origin).
 
@@ -230,8 +235,8 @@ def locomotion(trace: np.ndarray, forward, radius: float, rest_height: float, pe
            "sag_R": float((rest_height - com[0, 2]) / radius), "speed_R_per_T": None, "pulse_displacements_R": [],
            "pulse_alignment": []}  # fmt: skip
     crossings = upward_crossings(t, c)
-    if len(crossings) >= 2:
-        period = float(np.mean(np.diff(crossings)))
+    period = measured_period(crossings)
+    if period is not None:
         at = np.stack([np.interp(crossings, t, column) for column in np.hstack([com, origin]).T], axis=1)
         along = at[:, :3] @ forward
         step = np.diff(at[:, :2], axis=0)
@@ -255,9 +260,7 @@ def locomotion_png(runs, path, title: str = "walkers: displacement against time 
     fig, ax = plt.subplots(figsize=(6, 4.2))
     for name, sensitive, trace, forward, radius in runs:
         t, c, com = trace[:, 0], trace[:, 1], trace[:, 2:5]
-        crossings = upward_crossings(t, c)
-        period = float(np.mean(np.diff(crossings))) if len(crossings) >= 2 else None
-        scale = period or 1.0
+        scale = measured_period(upward_crossings(t, c)) or 1.0
         ax.plot(t / scale, (com - com[0]) @ np.asarray(forward) / radius, "-" if sensitive else "--",
                 label=f"{name} ({'sensitive' if sensitive else 'insensitive'})")  # fmt: skip
     ax.set_xlabel("t / T (T: the measured oscillation period)")

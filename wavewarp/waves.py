@@ -117,6 +117,11 @@ class _Stepper(ABC):
 
     # ---------------------------------------------------------------- stability guard
     @property
+    def fixed_dt(self) -> bool:
+        """True when dt was given (it stays as the surface moves); False when it follows the bound."""
+        return self._requested_dt is not None
+
+    @property
     def stable_dt(self) -> float:
         """The method's stability bound at the current surface (see `bound_formula`)."""
         self._refresh()
