@@ -7,15 +7,25 @@ import warp as wp
 from . import declare_overloads
 
 
+@wp.func
+def block_add(total: wp.array(dtype=Any), index: int, value: Any):
+    """total[index] += Σ value over the thread block (a shared-memory tile sum, one atomic per block)."""
+    wp.tile_atomic_add(total, wp.tile_sum(wp.tile(value, preserve_type=True)), offset=index)
+
+
 @wp.kernel
 def momentum_kernel(
     mass: wp.array(dtype=Any), x: wp.array(dtype=Any), v: wp.array(dtype=Any), momentum: wp.array(dtype=Any)
 ):
-    """momentum += [Σ M_I v_I, Σ M_I x_I × v_I] (zeroed by the caller)."""
+    """momentum += [Σ M_I v_I, Σ M_I x_I × v_I] (zeroed by the caller; launched on whole blocks)."""
     i = wp.tid()
-    p = mass[i] * v[i]
-    wp.atomic_add(momentum, 0, p)
-    wp.atomic_add(momentum, 1, wp.cross(x[i], p))
+    p = type(v[0])()
+    r = type(x[0])()
+    if i < x.shape[0]:
+        p = mass[i] * v[i]
+        r = x[i]
+    block_add(momentum, 0, p)
+    block_add(momentum, 1, wp.cross(r, p))
 
 
 @wp.kernel
@@ -23,12 +33,19 @@ def rigid_sums_kernel(
     forces: wp.array(dtype=Any), mass: wp.array(dtype=Any), x: wp.array(dtype=Any),
     sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any),
 ):  # fmt: skip
-    """sums += [Σ F, Σ x × F, Σ M x]; second_moment += Σ M x xᵀ (zeroed by the caller)."""
+    """sums += [Σ F, Σ x × F, Σ M x]; second_moment += Σ M x xᵀ (zeroed by the caller; launched on whole blocks)."""
     i = wp.tid()
-    wp.atomic_add(sums, 0, forces[i])
-    wp.atomic_add(sums, 1, wp.cross(x[i], forces[i]))
-    wp.atomic_add(sums, 2, mass[i] * x[i])
-    wp.atomic_add(second_moment, 0, mass[i] * wp.outer(x[i], x[i]))
+    f = type(forces[0])()
+    r = type(x[0])()
+    m = type(mass[0])(0.0)
+    if i < x.shape[0]:
+        f = forces[i]
+        r = x[i]
+        m = mass[i]
+    block_add(sums, 0, f)
+    block_add(sums, 1, wp.cross(r, f))
+    block_add(sums, 2, m * r)
+    block_add(second_moment, 0, m * wp.outer(r, r))
 
 
 @wp.kernel
@@ -76,6 +93,31 @@ def symplectic_euler_kernel(
 
 
 @wp.kernel
+def first_moment_kernel(mass: wp.array(dtype=Any), x: wp.array(dtype=Any), moment: wp.array(dtype=Any)):
+    """moment[0] += Σ M_I x_I (zeroed by the caller; launched on whole blocks)."""
+    i = wp.tid()
+    r = type(x[0])()
+    if i < x.shape[0]:
+        r = mass[i] * x[i]
+    block_add(moment, 0, r)
+
+
+@wp.kernel
+def trace_row_kernel(
+    c: wp.array(dtype=Any), x: wp.array(dtype=Any), origin: int, moment: wp.array(dtype=Any),
+    inverse_total_mass: Any, row: wp.array(dtype=wp.int32), trace: wp.array2d(dtype=Any),
+):  # fmt: skip
+    """Single thread: trace[row] = [c_origin, centre of mass (3), x_origin (3)], then row += 1."""
+    k = row[0]
+    centre = inverse_total_mass * moment[0]
+    trace[k, 0] = c[origin]
+    for j in range(3):
+        trace[k, 1 + j] = centre[j]
+        trace[k, 4 + j] = x[origin][j]
+    row[0] = k + 1
+
+
+@wp.kernel
 def speed_runaway_kernel(v: wp.array(dtype=Any), limit: Any, flag: wp.array(dtype=wp.int32)):
     """flag = 1 where |v_I| > limit or v_I is NaN/Inf (NaN fails every comparison)."""
     i = wp.tid()
@@ -90,4 +132,7 @@ declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]
                   inverse_total_mass="scalar", correction="vec3[]")  # fmt: skip
 declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]", damping="scalar",
                   dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3[]")
+declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar",
+                  trace="scalar[,]")  # fmt: skip
 declare_overloads(speed_runaway_kernel, v="vec3[]", limit="scalar")

@@ -5,8 +5,9 @@ resolve energy changes and V - V̄ far below the float32 spacing of their totals
 
 One thread per quadrature point. The active reference (ā⁻¹, ā, b̄, dω̄ weight) is computed by
 `active_reference_kernel` whenever c changes; the energy kernels read it. Forces are the exact
-negative gradient, scattered to the patch's control vertices with atomics (or written to
-per-slot buffers and gathered in a fixed order, for bitwise-reproducible sums).
+negative gradient, scattered to the patch's control vertices with atomics, or (deterministic)
+kept per point as a gradient jet (g, g,1, g,2, g,11, g,12, g,22) and gathered per vertex in a
+fixed order: no atomics, bitwise-reproducible sums.
 """
 
 from typing import Any
@@ -18,6 +19,7 @@ from .limit_surface import basis_row, first_form, patch_jet, patch_scalar, secon
 
 KOITER = wp.constant(0)
 BILAYER = wp.constant(1)
+MAX_PATCH = wp.constant(18)  # control vertices of a patch (valence N + 6): vertices of valence up to 12
 
 
 @wp.kernel
@@ -123,36 +125,28 @@ def koiter_energy_kernel(
 
 
 @wp.func
-def scatter_gradient(
-    forces: wp.array(dtype=Any),
-    slots: wp.array(dtype=Any),
-    deterministic: int,
-    patch_start: wp.array(dtype=wp.int32),
-    patch_vertices: wp.array(dtype=wp.int32),
-    basis: wp.array2d(dtype=Any),
-    t: int,
-    row: int,
-    slot_start: int,
-    g: Any,
-    g1: Any,
-    g2: Any,
-    g11: Any,
-    g12: Any,
-    g22: Any,
-):
-    """F_I -= N_I g + N_I,1 g1 + N_I,2 g2 + N_I,11 g11 + N_I,12 g12 + N_I,22 g22 over the patch."""
-    start = patch_start[t]
-    for k in range(patch_start[t + 1] - start):
-        b = basis[row, k]
-        f = -(b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22)
-        if deterministic == 0:
-            wp.atomic_add(forces, patch_vertices[start + k], f)
-        else:
-            slots[slot_start + k] = f
+def koiter_gradient_jet(
+    membrane: Any, bending: Any, inv: Any, w: Any, stretching_modulus: Any, bending_modulus: Any, nu: Any,
+    x1: Any, x2: Any, x11: Any, x12: Any, x22: Any, n: Any, j: Any,
+):  # fmt: skip
+    """∂(E_S + E_B)/∂(x,1, x,2, x,11, x,12, x,22) at one point (hand-derived, docs/shell.md)."""
+    # ∂W/∂a_αβ = S, ∂W/∂b_αβ = B (symmetric)
+    S = (stretching_modulus * w) * material_stress(membrane, inv, nu)
+    B = (bending_modulus * w) * material_stress(bending, inv, nu)
+    two = type(w)(2.0)
+    # a_αβ = a_α·a_β  ->  ∂/∂a_γ = 2 S_γβ a_β
+    g1 = two * (S[0, 0] * x1 + S[0, 1] * x2)
+    g2 = two * (S[1, 0] * x1 + S[1, 1] * x2)
+    # b_αβ = n·x,αβ with n = a_1×a_2/|a_1×a_2|: through n, m·dn = u·d(a_1×a_2), u = (I - nnᵀ) m / j
+    m = B[0, 0] * x11 + two * B[0, 1] * x12 + B[1, 1] * x22
+    u = (m - wp.dot(n, m) * n) / j
+    g1 += wp.cross(x2, u)
+    g2 += wp.cross(u, x1)
+    return g1, g2, B[0, 0] * n, two * B[0, 1] * n, B[1, 1] * n
 
 
 @wp.kernel
-def koiter_forces_kernel(
+def shell_forces_kernel(
     x: wp.array(dtype=Any),
     patch_start: wp.array(dtype=wp.int32),
     patch_vertices: wp.array(dtype=wp.int32),
@@ -166,39 +160,66 @@ def koiter_forces_kernel(
     stretching_modulus: Any,
     bending_modulus: Any,
     nu: Any,
-    deterministic: int,
+    weights: wp.array(dtype=Any),
+    x_sum: wp.array(dtype=Any),
+    volume: wp.array(dtype=wp.float64),
+    target: wp.float64,
+    penalty: wp.float64,
+    gather: int,
     energy_density: wp.array(dtype=wp.float64),
     forces: wp.array(dtype=Any),
-    slots: wp.array(dtype=Any),
+    jets: wp.array2d(dtype=Any),
 ):
-    """Energy density and the exact forces -∂(E_S + E_B)/∂x in one pass (hand-derived, docs/shell.md)."""
-    q = wp.tid()
-    t, row = basis_row(triangle_type, points_per_triangle, q)
-    inv = ref_metric_inv[q]
-    membrane, bending, x1, x2, x11, x12, x22, n, j = koiter_jet(
-        x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q], nu
-    )
-    w = ref_weight[q]
-    density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
-    energy_density[q] = wp.float64(density * w)
-    # ∂W/∂a_αβ = S, ∂W/∂b_αβ = B (symmetric)
-    S = (stretching_modulus * w) * material_stress(membrane, inv, nu)
-    B = (bending_modulus * w) * material_stress(bending, inv, nu)
-    two = type(w)(2.0)
-    # a_αβ = a_α·a_β  ->  ∂/∂a_γ = 2 S_γβ a_β
-    g1 = two * (S[0, 0] * x1 + S[0, 1] * x2)
-    g2 = two * (S[1, 0] * x1 + S[1, 1] * x2)
-    # b_αβ = n·x,αβ with n = a_1×a_2/|a_1×a_2|: through n, m·dn = u·d(a_1×a_2), u = (I - nnᵀ) m / j
-    m = B[0, 0] * x11 + two * B[0, 1] * x12 + B[1, 1] * x22
-    u = (m - wp.dot(n, m) * n) / j
-    g1 += wp.cross(x2, u)
-    g2 += wp.cross(u, x1)
-    zero = x1 * type(w)(0.0)
-    slot_start = points_per_triangle * patch_start[t] + (q % points_per_triangle) * (patch_start[t + 1] - patch_start[t])
-    scatter_gradient(
-        forces, slots, deterministic, patch_start, patch_vertices, basis, t, row, slot_start,
-        zero, g1, g2, B[0, 0] * n, two * B[0, 1] * n, B[1, 1] * n,
-    )  # fmt: skip
+    """One thread per triangle: the energy density at its points and the exact forces
+    -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `volume` must hold V).
+
+    Each point's gradient jet (g, g,1, g,2, g,11, g,12, g,22) is summed over the points into
+    per-vertex accumulators and added to `forces` with one atomic per patch vertex; with
+    `gather` it is written to `jets` instead, for the deterministic `gather_forces_kernel`.
+    Volume: 2 μV (V - V̄) ⅓ w [dx·(a_1×a_2) + da_1·(a_2×r) + da_2·(r×a_1)], r = x - x̄.
+    """
+    t = wp.tid()
+    start = patch_start[t]
+    size = patch_start[t + 1] - start
+    centroid = type(x[0])(control_centroid(x_sum, x.shape[0]))
+    pressure = wp.float64(2.0) / wp.float64(3.0) * penalty * (volume[0] - target)
+    accumulated = wp.matrix(shape=(MAX_PATCH, 3), dtype=type(nu))  # one row per patch vertex
+    for point in range(points_per_triangle):
+        q = t * points_per_triangle + point
+        row = triangle_type[t] * points_per_triangle + point
+        inv = ref_metric_inv[q]
+        p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+        cross = wp.cross(x1, x2)
+        j = wp.length(cross)
+        n = cross / j
+        membrane = inv * (first_form(x1, x2) - ref_metric[q])
+        bending = inv * (second_form(n, x11, x12, x22) - ref_curvature[q])
+        w = ref_weight[q]
+        density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
+        energy_density[q] = wp.float64(density * w)
+        g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bending, inv, w, stretching_modulus, bending_modulus, nu,
+                                                    x1, x2, x11, x12, x22, n, j)  # fmt: skip
+        scale = type(w)(pressure) * weights[point]
+        r = p - centroid
+        g = scale * cross
+        g1 += scale * wp.cross(x2, r)
+        g2 += scale * wp.cross(r, x1)
+        if gather != 0:
+            jets[q, 0] = g
+            jets[q, 1] = g1
+            jets[q, 2] = g2
+            jets[q, 3] = g11
+            jets[q, 4] = g12
+            jets[q, 5] = g22
+        else:
+            for k in range(size):
+                b = basis[row, k]
+                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
+                for c in range(3):
+                    accumulated[k, c] = accumulated[k, c] - f[c]
+    if gather == 0:
+        for k in range(size):
+            wp.atomic_add(forces, patch_vertices[start + k], type(x[0])(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2]))
 
 
 @wp.kernel
@@ -245,38 +266,6 @@ def volume_energy_kernel(volume: wp.array(dtype=wp.float64), target: wp.float64,
 
 
 @wp.kernel
-def volume_forces_kernel(
-    x: wp.array(dtype=Any),
-    patch_start: wp.array(dtype=wp.int32),
-    patch_vertices: wp.array(dtype=wp.int32),
-    triangle_type: wp.array(dtype=wp.int32),
-    basis: wp.array2d(dtype=Any),
-    weights: wp.array(dtype=Any),
-    points_per_triangle: int,
-    x_sum: wp.array(dtype=Any),
-    volume: wp.array(dtype=wp.float64),
-    target: wp.float64,
-    penalty: wp.float64,
-    deterministic: int,
-    forces: wp.array(dtype=Any),
-    slots: wp.array(dtype=Any),
-):
-    """-∂E_V/∂x through the patch: 2 μV (V - V̄) ⅓ w [dx·(a_1×a_2) + da_1·(a_2×r) + da_2·(r×a_1)], r = x - x̄."""
-    q = wp.tid()
-    t, row = basis_row(triangle_type, points_per_triangle, q)
-    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
-    w = weights[q % points_per_triangle]
-    scale = type(w)(wp.float64(2.0) / wp.float64(3.0) * penalty * (volume[0] - target)) * w
-    r = p - type(p)(control_centroid(x_sum, x.shape[0]))
-    zero = x1 * type(w)(0.0)
-    slot_start = points_per_triangle * patch_start[t] + (q % points_per_triangle) * (patch_start[t + 1] - patch_start[t])
-    scatter_gradient(
-        forces, slots, deterministic, patch_start, patch_vertices, basis, t, row, slot_start,
-        scale * wp.cross(x1, x2), scale * wp.cross(x2, r), scale * wp.cross(r, x1), zero, zero, zero,
-    )  # fmt: skip
-
-
-@wp.kernel
 def volume_centroid_forces_kernel(
     volume: wp.array(dtype=wp.float64),
     normal_sum: wp.array(dtype=wp.vec3d),
@@ -291,17 +280,30 @@ def volume_centroid_forces_kernel(
 
 
 @wp.kernel
-def gather_slots_kernel(
-    slots: wp.array(dtype=Any),
-    vertex_slot_start: wp.array(dtype=wp.int32),
-    vertex_slots: wp.array(dtype=wp.int32),
+def gather_forces_kernel(
+    jets: wp.array2d(dtype=Any),
+    vertex_entry_start: wp.array(dtype=wp.int32),
+    vertex_entries: wp.array(dtype=wp.int32),
+    entry_triangle: wp.array(dtype=wp.int32),
+    patch_start: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
     forces: wp.array(dtype=Any),
 ):
-    """Deterministic scatter: each vertex adds its slots in a fixed order."""
+    """Deterministic forces (overwritten): vertex I gathers -Σ N_I,· · (g, g1, g2, g11, g12, g22) over the quadrature
+    points of every patch it belongs to, in a fixed order (no atomics; bitwise reproducible)."""
     i = wp.tid()
-    f = forces[i]
-    for k in range(vertex_slot_start[i], vertex_slot_start[i + 1]):
-        f += slots[vertex_slots[k]]
+    f = type(forces[i])()
+    for e in range(vertex_entry_start[i], vertex_entry_start[i + 1]):
+        entry = vertex_entries[e]
+        t = entry_triangle[entry]
+        k = entry - patch_start[t]
+        for point in range(points_per_triangle):
+            q = t * points_per_triangle + point
+            b = basis[triangle_type[t] * points_per_triangle + point, k]
+            f -= b[0] * jets[q, 0] + b[1] * jets[q, 1] + b[2] * jets[q, 2]
+            f -= b[3] * jets[q, 3] + b[4] * jets[q, 4] + b[5] * jets[q, 5]
     forces[i] = f
 
 
@@ -320,13 +322,11 @@ declare_overloads(
     AC="scalar", AI="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE,
 )  # fmt: skip
 declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
-declare_overloads(koiter_forces_kernel, x="vec3[]", forces="vec3[]", slots="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
+declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", forces="vec3[]", jets="vec3[,]",
+                  **_PATCH, **_REFERENCE, **_MODULI)  # fmt: skip
 declare_overloads(volume_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", **_PATCH)
-declare_overloads(
-    volume_forces_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", forces="vec3[]", slots="vec3[]", **_PATCH
-)  # fmt: skip
 declare_overloads(volume_centroid_forces_kernel, forces="vec3[]")
-declare_overloads(gather_slots_kernel, slots="vec3[]", forces="vec3[]")
+declare_overloads(gather_forces_kernel, jets="vec3[,]", forces="vec3[]", **_PATCH)
 declare_overloads(negate_kernel, a="vec3[]", out="vec3[]")
 declare_overloads(sum_kernel, values="vec3[]", total="vec3[]")  # control-point sums (centroid)
 wp.overload(sum_kernel, {"values": wp.array(dtype=wp.float64), "total": wp.array(dtype=wp.float64)})

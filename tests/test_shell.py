@@ -193,6 +193,13 @@ def test_bad_parameters_name_the_argument(kwargs, message):
         Shell(icosphere(1.0, 1), **arguments)
 
 
+def test_a_vertex_of_too_high_valence_is_refused_by_name():
+    """The force kernel accumulates a patch in registers: valence 13 (a 13-gon bipyramid's poles) is named."""
+    with pytest.raises(ValueError, match="valence 13.*up to 12"):
+        Shell(bipyramid(13).subdivided(1), 0.1, 1.0, device="cpu")
+    Shell(bipyramid(12).subdivided(1), 0.1, 1.0, device="cpu")
+
+
 def test_bad_arrays_name_the_argument():
     mesh = icosphere(1.0, 1)
     shell = Shell(mesh, 0.1, 1.0, device="cpu")

@@ -157,3 +157,52 @@ def test_every_walker_runs_quick(scene, tmp_path, capsys):
     result = json.loads(stdout)
     assert result["scene"] == scene and result["frames"] == 5
     assert np.linalg.norm(result["displacement"]) > 0 and abs(result["lateral_R"]) < 0.1 * abs(result["distance_R"])
+
+
+def small_walking(check_every, speed_limit=None, sensitive=True):
+    """A level-1 ball on the ground with an FHN pulse, coupled as the walkers are (float64, CPU)."""
+    from wavewarp.coupled import Walking
+    from wavewarp.dynamics import Ground, ShellDynamics
+    from wavewarp.laplace import LaplaceBeltrami
+    from wavewarp.mesh import Mesh, icosphere
+    from wavewarp.shell import Shell
+    from wavewarp.waves import FitzHughNagumo, gaussian_pulse
+
+    mesh = icosphere(1.0, 1)
+    mesh = Mesh(mesh.vertices + [0.0, 0.0, 0.95], mesh.triangles)
+    shell = Shell(mesh, thickness=0.1, young=50.0, AC=0.2, volume_penalty=5.0, device="cpu", dtype="float64")
+    dynamics = ShellDynamics(shell, density=1.0, gravity=0.5, ground=Ground(), damping=0.2, speed_limit=speed_limit)
+    operator = LaplaceBeltrami(mesh, mesh.vertices, device="cpu", dtype="float64")
+    c0, _ = gaussian_pulse(operator, 0, 0.3, gamma=0.2, radius=1.0)
+    wave = FitzHughNagumo(operator, 0.2, c0=c0, dt=0.05)
+    return Walking(dynamics, wave, sensitive=sensitive, check_every=check_every)
+
+
+def test_walking_in_chunks_equals_walking_step_by_step():
+    """advance(n) runs chunks of `check_every` coupled steps with one check each: the same arithmetic
+    as n single steps, so the same state, time and step counts."""
+    chunked, single = small_walking(check_every=4), small_walking(check_every=1)
+    chunked.advance(10)
+    for _ in range(10):
+        single.step()
+    for a, b in ((chunked.dynamics.x, single.dynamics.x), (chunked.dynamics.v, single.dynamics.v),
+                 (chunked.wave.c, single.wave.c), (chunked.wave.w, single.wave.w)):  # fmt: skip
+        assert np.array_equal(a.numpy(), b.numpy())
+    assert chunked.wave.steps == single.wave.steps == 10
+    assert chunked.dynamics.steps == 10 * chunked.substeps
+    assert chunked.time == pytest.approx(10 * chunked.wave.dt, rel=1e-12)
+    assert chunked.dynamics.time == pytest.approx(chunked.time, rel=1e-12)
+
+
+def test_walking_blow_up_restores_the_chunk_start():
+    """A speed past the limit inside a chunk raises BlowUpError naming the time; the state returns to
+    where the chunk began (nothing half-stepped is kept) and the clocks do not move."""
+    from wavewarp.waves import BlowUpError
+
+    run = small_walking(check_every=5, speed_limit=1e-9)
+    before = [a.numpy().copy() for a in (run.dynamics.x, run.dynamics.v, run.wave.c, run.wave.w)]
+    with pytest.raises(BlowUpError, match="blew up between t = 0 and t = 0.25"):
+        run.advance(5)
+    after = [a.numpy() for a in (run.dynamics.x, run.dynamics.v, run.wave.c, run.wave.w)]
+    assert all(np.array_equal(a, b) for a, b in zip(before, after))
+    assert run.wave.steps == 0 and run.dynamics.steps == 0

@@ -21,11 +21,13 @@ import math
 import numpy as np
 import warp as wp
 
+from . import kernels
 from .checks import count
 from .laplace import LaplaceBeltrami
 from .relax import relax
+from .device import run_steps
 from .shell import RelaxationError, Shell
-from .waves import _Stepper
+from .waves import BlowUpError, TimeStepError, _Stepper
 
 ROUND_OFF_SLACK = 10.0
 
@@ -108,16 +110,23 @@ class QuasiStatic:
 class Walking:
     """Couple a `wave` (FitzHughNagumo or Telegraph) to inertial shell `dynamics` (the walkers, SPEC §3, §4).
 
-    One `step()`, one chemistry step dt_c:
-    1. the wave advances one step (its own stability guard);
+    One coupled step, one chemistry step dt_c:
+    1. the wave advances one step;
     2. the shell's active reference follows the new c (device to device);
     3. the mechanics advance `substeps` steps of dt_c / substeps (the largest divisor step within
        the mechanics' bound), so both clocks stay equal;
     4. deformation-sensitive runs move the wave's operator to the new positions; the insensitive
-       twin keeps the rest surface (M and K fixed).
+       twin keeps the rest surface (M and K fixed);
+    5. `recorder()`, if given, launches device-only work (e.g. a trace row).
+
+    `advance(steps)` runs chunks of up to `check_every` coupled steps with no host round-trip (one
+    CUDA graph per chunk size). After each chunk one flag is read (NaN/Inf or runaway values of c,
+    w, v: BlowUpError with the state restored to the chunk's start); sensitive runs then re-check
+    the wave's stability bound on the moved surface (TimeStepError, state restored, if the fixed dt
+    now exceeds it).
     """
 
-    def __init__(self, dynamics, wave: _Stepper, *, sensitive: bool = True):
+    def __init__(self, dynamics, wave: _Stepper, *, sensitive: bool = True, check_every: int = 20, recorder=None):
         from .dynamics import ShellDynamics
 
         if not isinstance(dynamics, ShellDynamics):
@@ -132,21 +141,74 @@ class Walking:
                              f"{op.scalar.__name__}) must share device and dtype")  # fmt: skip
         self.dynamics, self.wave, self.shell, self.operator = dynamics, wave, shell, op
         self.sensitive = bool(sensitive)
+        self.check_every = count("check_every", check_every, 1)
+        self.recorder = recorder
         if not wave.fixed_dt:  # an automatic dt follows the moving surface: the clocks would part
             raise ValueError("Walking needs a wave with a fixed dt (the mechanics step divides it)")
         self.substeps = math.ceil(wave.dt / dynamics.dt * (1 - 1e-12))
         dynamics.set_time_step(wave.dt / self.substeps, dynamics.omega_max)
         self.shell.update_reference(wave.c)
+        self._graphs = {}
+        self._state = wave._state() + [dynamics.x, dynamics.v]
+        self._backups = [wp.empty_like(a) for a in self._state]
 
     @property
     def time(self) -> float:
         return self.wave.time
 
-    def step(self):
-        """One chemistry step and the mechanics over it; returns self."""
-        self.wave.advance(1)
+    def _step(self) -> None:
+        self.wave._step()
         self.shell.update_reference(self.wave.c)
-        self.dynamics.advance(self.substeps)
+        for _ in range(self.substeps):
+            self.dynamics._step()
         if self.sensitive:
             self.operator.update(self.dynamics.x)
+        if self.recorder is not None:
+            self.recorder()
+
+    def _restore(self) -> None:
+        for backup, a in zip(self._backups, self._state):
+            wp.copy(a, backup)
+        self.shell.update_reference(self.wave.c)
+        if self.sensitive:
+            self.operator.update(self.dynamics.x)
+
+    def advance(self, steps: int = 1):
+        """Advance `steps` coupled steps on the device; returns self."""
+        steps = count("steps", steps, 0)
+        wave, dynamics = self.wave, self.dynamics
+        wave._refresh()
+        modules = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
+                   kernels.reduce)  # fmt: skip
+        done = 0
+        while done < steps:
+            chunk = min(self.check_every, steps - done)
+            for backup, a in zip(self._backups, self._state):
+                wp.copy(backup, a)
+            run_steps(self._step, chunk, device=self.shell.device, graphs=self._graphs, modules=modules,
+                      capture=dynamics.capture and wave.capture)  # fmt: skip
+            wave._flag.zero_()
+            wave._check_chunk()
+            failure = dynamics.runaway(dynamics.time, chunk * wave.dt) if not wave._flag.numpy()[0] else BlowUpError(
+                f"{wave.scheme} coupled to the {dynamics.scheme} blew up between t = {wave.time:.6g} and "
+                f"t = {wave.time + chunk * wave.dt:.6g} (NaN/Inf or |c|, |w| past {wave.blowup_limit:.3g}); the state "
+                f"is restored to t = {wave.time:.6g}. Reduce dt", wave.time, wave.steps)  # fmt: skip
+            if failure is None and self.sensitive:
+                self.operator.update(dynamics.x)  # a graph replay moved the surface without a new `version`
+                try:
+                    wave._refresh()  # the surface moved: λ_max on the new surface, against the fixed dt
+                except TimeStepError as error:
+                    failure = error
+            if failure is not None:
+                self._restore()
+                raise failure
+            done += chunk
+            wave.steps += chunk
+            wave.time += chunk * wave.dt
+            dynamics.steps += chunk * self.substeps
+            dynamics.time += chunk * self.substeps * dynamics.dt
         return self
+
+    def step(self):
+        """One coupled step (chemistry and the mechanics over it); returns self."""
+        return self.advance(1)

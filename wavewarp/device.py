@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .kernels.reduce import REDUCTION_BLOCK, block_sum_kernel
+
 DTYPES = {"float32": wp.float32, "float64": wp.float64}
 
 
@@ -47,6 +49,18 @@ def vec6(scalar):
 
 def mat22(scalar):
     return wp.types.matrix((2, 2), scalar)
+
+
+def reduction_threads(n: int) -> int:
+    """Threads of a block-reduction launch over n items: whole blocks of REDUCTION_BLOCK."""
+    return -(-n // REDUCTION_BLOCK) * REDUCTION_BLOCK
+
+
+def block_sum(values: wp.array, total: wp.array) -> None:
+    """total[0] = Σ values on the values' device: a block reduction (capturable in a CUDA graph)."""
+    total.zero_()
+    wp.launch_tiled(block_sum_kernel, dim=[reduction_threads(len(values)) // REDUCTION_BLOCK], inputs=[values],
+                    outputs=[total], block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
 
 
 def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool) -> None:

@@ -27,21 +27,25 @@ import numpy as np
 import warp as wp
 
 from .checks import count, finite, positive
-from .device import run_steps
+from .device import reduction_threads, run_steps
 from .geometry import LimitMask, checked_positions
 from .kernels import contact as kernels_contact
 from .kernels import dynamics as kernels_dynamics
 from .kernels import limit_surface as kernels_limit_surface
+from .kernels import reduce as kernels_reduce
 from .kernels import shell as kernels_shell
 from .kernels.contact import friction_kernel, gravity_kernel, ground_contact_kernel, limit_transpose_kernel
 from .kernels.dynamics import (
+    first_moment_kernel,
     momentum_kernel,
     rigid_correction_kernel,
     rigid_sums_kernel,
     speed_runaway_kernel,
     symplectic_euler_kernel,
+    trace_row_kernel,
 )
 from .kernels.limit_surface import limit_positions_kernel
+from .kernels.reduce import REDUCTION_BLOCK
 from .laplace import LaplaceBeltrami
 from .shell import Shell
 from .waves import BlowUpError, TimeStepError
@@ -69,7 +73,8 @@ class ShellDynamics:
     density ρ (mass per reference area); c the control concentrations of the active reference
     (default 0; a coupled stepper updates it with `shell.update_reference`); gravity g (along -z; 0 for none); ground a `Ground` or
     None; damping η ≥ 0 (relative to the rigid-body motion); dt None picks `safety` × the stability
-    bound, a fixed dt past it raises TimeStepError (check_dt=False lets it run: stability studies). Every `check_every` steps one flag is read:
+    bound, a fixed dt past it raises TimeStepError (check_dt=False lets it run: stability studies);
+    omega, when known (the `omega_max` of an identical run), skips the Lanczos estimate of ω. Every `check_every` steps one flag is read:
     NaN/Inf or a speed past `speed_limit` raises BlowUpError with the state restored.
     """
 
@@ -77,7 +82,7 @@ class ShellDynamics:
 
     def __init__(self, shell: Shell, *, density, gravity=0.0, ground: Ground | None = None, damping=0.0, x0=None,
                  v0=None, c=None, dt=None, safety=0.9, check_dt=True, check_every=100, speed_limit=None,
-                 capture=True):  # fmt: skip
+                 capture=True, omega=None):  # fmt: skip
         if not isinstance(shell, Shell):
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         if ground is not None and not isinstance(ground, Ground):
@@ -96,6 +101,7 @@ class ShellDynamics:
         self.capture = bool(capture) and wp.get_device(self.device).is_cuda
         mesh = shell.mesh
         n = mesh.n_vertices
+        self._reduction_threads = reduction_threads(n)
         rest = LaplaceBeltrami(mesh, rule=shell.rule, device=self.device, dtype="float64")
         self.mass = self.density * rest.mass()  # ρ ∫ N_I dω̄⁰ on the rest surface
         self.total_mass = float(self.mass.sum())
@@ -112,6 +118,7 @@ class ShellDynamics:
             self._rigid_sums = wp.zeros(3, dtype=self.vec3)
             self._second_moment = wp.zeros(1, dtype=wp.types.matrix((3, 3), self.scalar))
             self._rigid = wp.zeros(5, dtype=self.vec3)
+            self._first_moment = wp.zeros(1, dtype=self.vec3)
             self._limit_x = wp.zeros(n, dtype=self.vec3)
             self._limit_v = wp.zeros(n, dtype=self.vec3)
             self._limit_forces = wp.zeros(n, dtype=self.vec3)
@@ -123,7 +130,7 @@ class ShellDynamics:
         self.time, self.steps = 0.0, 0
         self._graphs, self.dt = {}, None
         self.contact_damping = self._contact_damping()
-        self.set_time_step(dt, self.largest_frequency(), check_dt)
+        self.set_time_step(dt, self.largest_frequency() if omega is None else omega, check_dt)
         typical = self.gravity * 1e3 * self.dt * self.check_every + float(np.abs(v0).max()) + 1.0
         self.speed_limit = positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
 
@@ -215,11 +222,12 @@ class ShellDynamics:
         self.shell.forces_device(self.x, self._forces)
         self._rigid_sums.zero_()
         self._second_moment.zero_()
-        wp.launch(rigid_sums_kernel, dim=n, inputs=[self._forces, self._mass, self.x],
-                  outputs=[self._rigid_sums, self._second_moment])  # fmt: skip
+        wp.launch(rigid_sums_kernel, dim=self._reduction_threads, inputs=[self._forces, self._mass, self.x],
+                  outputs=[self._rigid_sums, self._second_moment], block_dim=REDUCTION_BLOCK)  # fmt: skip
         if self.damping > 0:
             self._momentum.zero_()
-            wp.launch(momentum_kernel, dim=n, inputs=[self._mass, self.x, self.v], outputs=[self._momentum])
+            wp.launch(momentum_kernel, dim=self._reduction_threads, inputs=[self._mass, self.x, self.v],
+                      outputs=[self._momentum], block_dim=REDUCTION_BLOCK)  # fmt: skip
         wp.launch(rigid_correction_kernel, dim=1,
                   inputs=[self._rigid_sums, self._second_moment, self._momentum, s(1.0 / self.total_mass)],
                   outputs=[self._rigid])  # fmt: skip
@@ -230,7 +238,8 @@ class ShellDynamics:
 
     def _run(self, steps: int) -> None:
         run_steps(self._step, steps, device=self.device, graphs=self._graphs,
-                  modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface), capture=self.capture)  # fmt: skip
+                  modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface, kernels_reduce),
+                  capture=self.capture)  # fmt: skip
 
     def advance(self, steps: int = 1):
         """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""
@@ -241,22 +250,29 @@ class ShellDynamics:
             for backup, a in zip(self._backups, (self.x, self.v)):
                 wp.copy(backup, a)
             self._run(chunk)
-            self._flag.zero_()
-            wp.launch(speed_runaway_kernel, dim=len(self.mass), inputs=[self.v, self.scalar(self.speed_limit)],
-                      outputs=[self._flag], device=self.device)  # fmt: skip
-            if self._flag.numpy()[0]:
+            failure = self.runaway(self.time, chunk * self.dt)
+            if failure is not None:
                 for backup, a in zip(self._backups, (self.x, self.v)):
                     wp.copy(a, backup)
-                raise BlowUpError(
-                    f"{self.scheme} blew up between t = {self.time:.6g} and t = {self.time + chunk * self.dt:.6g} "
-                    f"(NaN/Inf or a speed past {self.speed_limit:.3g}) with dt = {self.dt:.6g} (stability bound "
-                    f"{self.stable_dt:.6g}); the state is restored to t = {self.time:.6g}. Reduce dt",
-                    self.time, self.steps,
-                )  # fmt: skip
+                raise failure
             done += chunk
             self.steps += chunk
             self.time += chunk * self.dt
         return self
+
+    def runaway(self, time: float, duration: float) -> BlowUpError | None:
+        """Read one flag: a BlowUpError (not raised) if some |v_I| passed `speed_limit` or is NaN/Inf,
+        for the steps from `time` over `duration`; None when all is well."""
+        self._flag.zero_()
+        wp.launch(speed_runaway_kernel, dim=len(self.mass), inputs=[self.v, self.scalar(self.speed_limit)],
+                  outputs=[self._flag], device=self.device)  # fmt: skip
+        if not self._flag.numpy()[0]:
+            return None
+        return BlowUpError(
+            f"{self.scheme} blew up between t = {time:.6g} and t = {time + duration:.6g} (NaN/Inf or a speed past "
+            f"{self.speed_limit:.3g}) with dt = {self.dt:.6g} (stability bound {self.stable_dt:.6g}); the state is "
+            f"restored to t = {time:.6g}. Reduce dt", time, self.steps,
+        )  # fmt: skip
 
     def run_until(self, time: float):
         """Advance by whole steps to the first step at or after `time`; returns self."""
@@ -268,6 +284,15 @@ class ShellDynamics:
 
     def velocities(self) -> np.ndarray:
         return self.v.numpy().astype(np.float64)
+
+    def launch_trace_row(self, c: wp.array, origin: int, row: wp.array, trace: wp.array) -> None:
+        """Device only (capturable): trace[row] = [c_origin, centre of mass, x_origin], row += 1."""
+        self._first_moment.zero_()
+        wp.launch(first_moment_kernel, dim=self._reduction_threads, inputs=[self._mass, self.x],
+                  outputs=[self._first_moment], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
+        wp.launch(trace_row_kernel, dim=1, inputs=[c, self.x, int(origin), self._first_moment,
+                                                   self.scalar(1.0 / self.total_mass)],
+                  outputs=[row, trace], device=self.device)  # fmt: skip
 
     def center_of_mass(self) -> np.ndarray:
         """Σ M_I x_I / Σ M_I: exactly the centre of mass of the density ρ on the surface."""

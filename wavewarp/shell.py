@@ -19,18 +19,18 @@ import numpy as np
 import warp as wp
 
 from .checks import finite, positive
-from .device import mat22, numpy_dtype
+from .device import block_sum, mat22, numpy_dtype
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.shell import (
+    MAX_PATCH,
     active_reference_kernel,
-    gather_slots_kernel,
+    gather_forces_kernel,
     koiter_energy_kernel,
-    koiter_forces_kernel,
     negate_kernel,
+    shell_forces_kernel,
     sum_kernel,
     volume_centroid_forces_kernel,
     volume_energy_kernel,
-    volume_forces_kernel,
     volume_kernel,
 )
 from .mesh import Mesh
@@ -84,6 +84,10 @@ class Shell:
         self.tables = SurfaceTables.of(mesh, self.rule, device=device, dtype=dtype)
         self.device, self.scalar, self.vec3 = self.tables.device, self.tables.scalar, self.tables.vec3
         self._real = numpy_dtype(self.scalar)
+        patch = int(np.diff(self.tables.host.patch_start).max())
+        if patch > MAX_PATCH:
+            raise ValueError(f"the mesh has a vertex of valence {patch - 6}; the force kernel handles valences up to "
+                             f"{MAX_PATCH - 6}: remesh to lower it")  # fmt: skip
         n_q = self.tables.n_quadrature_points
         rest = evaluate(self.tables, self.tables.positions())
         self.rest_metric, self.rest_curvature = rest["metric"], rest["curvature"]
@@ -113,12 +117,13 @@ class Shell:
             self._x = wp.zeros(mesh.n_vertices, dtype=self.vec3, requires_grad=True)
             self._forces = wp.zeros(mesh.n_vertices, dtype=self.vec3)
             if self.deterministic:
-                self._slots = wp.zeros(self.tables.points_per_triangle * len(self.tables.host.patch_vertices), dtype=self.vec3)
-                start, order = _vertex_slots(self.tables.host, mesh.n_vertices)
-                self._vertex_slot_start = wp.array(start, dtype=wp.int32)
-                self._vertex_slots = wp.array(order, dtype=wp.int32)
+                self._jets = wp.zeros((n_q, 6), dtype=self.vec3)
+                start, entries, triangle = _vertex_entries(self.tables.host, mesh.n_vertices)
+                self._vertex_entry_start = wp.array(start, dtype=wp.int32)
+                self._vertex_entries = wp.array(entries, dtype=wp.int32)
+                self._entry_triangle = wp.array(triangle, dtype=wp.int32)
             else:
-                self._slots = wp.zeros(1, dtype=self.vec3)
+                self._jets = wp.zeros((1, 6), dtype=self.vec3)
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
@@ -146,12 +151,16 @@ class Shell:
         return float(self._volume.numpy()[0])
 
     def _sum(self, values: wp.array, total: wp.array, differentiable: bool) -> None:
-        """total[0] = Σ values: a tree reduction, or atomics where Warp's tape must follow."""
+        """total[0] = Σ values: a block reduction (its blocks add atomically, in any order), Warp's
+        fixed-order tree reduction for deterministic shells, or same-address atomics where Warp's
+        tape must follow."""
         if differentiable:
             total.zero_()
             wp.launch(sum_kernel, dim=len(values), inputs=[values], outputs=[total], device=self.device)
-        else:
+        elif self.deterministic:
             wp.utils.array_sum(values, out=total)
+        else:
+            block_sum(values, total)
 
     def _launch_volume(self, x: wp.array, differentiable: bool) -> None:
         """V about the control centroid, and S = ⅓ ∫ n dω, into self._volume, self._normal_sum."""
@@ -186,41 +195,35 @@ class Shell:
     def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array | None = None) -> None:
         """forces = -∂E/∂x and, when given, energy[0] = E at the current reference (both overwritten).
 
-        With energy=None only the forces, reduced with atomics: capturable in a CUDA graph (dynamics).
+        No host round-trip: capturable in a CUDA graph (dynamics).
         """
-        forces.zero_()
         if self.gradient == "autodiff":
             self._autodiff_forces(x, forces, self._energy if energy is None else energy)
             return
         t = self.tables
-        flag = int(self.deterministic)
-        wp.launch(koiter_forces_kernel, dim=t.n_quadrature_points, inputs=self._elastic_inputs(x) + [flag],
-                  outputs=[self._energy_density, forces, self._slots], device=self.device)  # fmt: skip
-        self._gather(forces)
-        if energy is not None:
-            self._sum(self._energy_density, energy, differentiable=False)
+        target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
         if self.volume_penalty > 0:
-            target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
-            self._launch_volume(x, differentiable=energy is None)
-            if energy is not None:
-                wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
-                          device=self.device)  # fmt: skip
-            wp.launch(
-                volume_forces_kernel, dim=t.n_quadrature_points,
-                inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
-                        self._x_sum, self._volume, target, penalty, flag],
-                outputs=[forces, self._slots], device=self.device,
-            )  # fmt: skip
-            self._gather(forces)
+            self._launch_volume(x, differentiable=False)  # V for the pressure, S for the centroid term
+        if not self.deterministic:
+            forces.zero_()  # the atomic scatter adds; the deterministic gather writes
+        wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles,
+                  inputs=self._elastic_inputs(x) + [t.weights, self._x_sum, self._volume, target, penalty,
+                                                    int(self.deterministic)],
+                  outputs=[self._energy_density, forces, self._jets], device=self.device)  # fmt: skip
+        if self.deterministic:
+            wp.launch(gather_forces_kernel, dim=self.mesh.n_vertices,
+                      inputs=[self._jets, self._vertex_entry_start, self._vertex_entries, self._entry_triangle,
+                              t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
+                      outputs=[forces], device=self.device)  # fmt: skip
+        if self.volume_penalty > 0:
             wp.launch(volume_centroid_forces_kernel, dim=len(forces),
                       inputs=[self._volume, self._normal_sum, target, penalty], outputs=[forces],
                       device=self.device)  # fmt: skip
-
-    def _gather(self, forces: wp.array) -> None:
-        if self.deterministic:
-            wp.launch(gather_slots_kernel, dim=self.mesh.n_vertices,
-                      inputs=[self._slots, self._vertex_slot_start, self._vertex_slots], outputs=[forces],
-                      device=self.device)  # fmt: skip
+        if energy is not None:
+            self._sum(self._energy_density, energy, differentiable=False)
+            if self.volume_penalty > 0:
+                wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
+                          device=self.device)  # fmt: skip
 
     def _autodiff_forces(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
         xg = wp.clone(x, requires_grad=True)
@@ -291,15 +294,12 @@ class Shell:
         return relax(self, xw, tol, int(max_iterations), callback)
 
 
-def _vertex_slots(host, n_vertices: int):
-    """For the deterministic scatter: each vertex's slots in (triangle, point, k) order."""
-    P = host.points_per_triangle
+def _vertex_entries(host, n_vertices: int):
+    """For the deterministic gather: each vertex's entries in the patch table (in table order) and
+    the triangle of every entry."""
     sizes = np.diff(host.patch_start)
-    triangle = np.repeat(np.arange(len(sizes)), sizes)
-    k = np.arange(len(host.patch_vertices)) - host.patch_start[triangle]
-    vertex = np.tile(host.patch_vertices, P).reshape(P, -1)
-    slot = P * host.patch_start[triangle][None, :] + np.arange(P)[:, None] * sizes[triangle][None, :] + k[None, :]
-    vertex, slot = vertex.reshape(-1), slot.reshape(-1)
-    order = np.lexsort((slot, vertex))
+    triangle = np.repeat(np.arange(len(sizes)), sizes).astype(np.int32)
+    vertex = np.asarray(host.patch_vertices)
+    order = np.argsort(vertex, kind="stable")
     start = np.concatenate([[0], np.cumsum(np.bincount(vertex, minlength=n_vertices))])
-    return start.astype(np.int32), slot[order].astype(np.int32)
+    return start.astype(np.int32), order.astype(np.int32), triangle

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import warp as wp
 
 from .coupled import Walking
 from .dynamics import Ground, ShellDynamics
@@ -117,9 +118,12 @@ class WalkerRun(WaveClock):
         width = p["width"] or 1.5 * mean_edge(mesh)
         c0, _ = gaussian_pulse(self.operator, self.origin_vertex, width / radius, gamma=p["gamma"], radius=radius)
         self.wave = FitzHughNagumo(self.operator, p["gamma"], p["nu"], p["kappa"], p["epsilon"], c0=c0, dt=p["dt"])
-        self.coupled = Walking(self.dynamics, self.wave, sensitive=p["sensitive"])
         t_end = p["periods"] * self.period_kinetic
         self.steps_per_frame = max(1, round(t_end / p["frames"] / self.wave.dt))
+        with wp.ScopedDevice(self.shell.device):
+            self._trace_row = wp.zeros(1, dtype=wp.int32)
+            self._trace_rows = wp.zeros((self.steps_per_frame, TRACE_COLUMNS - 1), dtype=self.shell.scalar)
+        self.coupled = Walking(self.dynamics, self.wave, sensitive=p["sensitive"], recorder=self._record_trace_row)
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
         self.resolved = {**p, "width": width, "mechanics_dt": self.dynamics.dt, "substeps": self.coupled.substeps,
                          "period_kinetic": self.period_kinetic}  # fmt: skip
@@ -135,8 +139,6 @@ class WalkerRun(WaveClock):
     def _bound_over_reference_range(self) -> None:
         """ω for the mechanics' bound: the largest over the uniform references c = 0, c = 1 and the
         FHN lower branch's c = -0.4 (the wave spans [-0.4, 1]); the contraction stiffens the shell."""
-        import warp as wp
-
         shell, omegas = self.shell, [self.dynamics.omega_max]
         for value in (1.0, -0.4):
             shell.update_reference(wp.full(self.mesh.n_vertices, value, dtype=shell.scalar, device=shell.device))
@@ -154,17 +156,19 @@ class WalkerRun(WaveClock):
                 "concentration": self.wave.concentration(), "inhibitor": self.wave.inhibitor(),
                 "trace": self._frame_trace}  # fmt: skip
 
+    def _record_trace_row(self) -> None:
+        self.dynamics.launch_trace_row(self.wave.c, self.origin_vertex, self._trace_row, self._trace_rows)
+
     def advance_frame(self) -> None:
-        rows = []
-        for _ in range(self.steps_per_frame):
-            self.coupled.step()
-            rows.append(self._sample())
-        self._frame_trace = np.array(rows)
+        """One frame of coupled steps on the device; the trace rows (one per chemistry step) are read once."""
+        start = self.wave.steps
+        self._trace_row.zero_()
+        self.coupled.advance(self.steps_per_frame)
+        times = (start + np.arange(1, self.steps_per_frame + 1)) * self.wave.dt
+        self._frame_trace = np.column_stack([times, self._trace_rows.numpy().astype(np.float64)])
 
     def restore(self, frame: dict) -> None:
         """Continue from a saved frame (HDF5 resume): positions, velocities, c, w and the time."""
-        import warp as wp
-
         real, d = self.shell._real, self.dynamics
         d.x.assign(np.asarray(frame["positions"]).astype(real))
         d.v.assign(np.asarray(frame["velocities"]).astype(real))
