@@ -56,7 +56,7 @@ from numpy.polynomial import legendre
 from scipy.optimize import brentq
 
 from wavewarp.device import resolve_device
-from wavewarp.io import atomic_path
+from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import cube, icosphere, prism
 from wavewarp.quadrature import triangle_rule
@@ -605,9 +605,7 @@ def chart(case, result, recommendations, path, title) -> None:
     fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=7, frameon=False)
     fig.suptitle(title, fontsize=11)
     fig.tight_layout(rect=(0, 0.04 + 0.035 * math.ceil(len(handles) / 4) / rows, 1, 1))
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    write_png(fig, path, dpi=110)
 
 
 DESCRIPTIONS = {
@@ -623,8 +621,7 @@ DESCRIPTIONS = {
 
 
 def save_json(path, result) -> None:
-    with atomic_path(path) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(path, result)
 
 
 def main(argv=None) -> int:

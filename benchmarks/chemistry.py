@@ -35,7 +35,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import warp as wp
 
-from wavewarp.io import atomic_path
+from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.waves import FitzHughNagumo, Telegraph, gaussian_pulse
@@ -191,17 +191,14 @@ def chart(result, path) -> None:
     right.legend(fontsize=8)
     fig.suptitle(f"wavewarp chemistry, {result['device_name']} ({result['date']})")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_png(fig, path)
 
 
 def save_json(args, device, result) -> str:
     """Write the result (also after every throughput row, so an interrupted run keeps its rows)."""
     name = f"chemistry_{device.alias.replace(':', '')}{'_quick' if args.quick else ''}"
     path = os.path.join(args.out, name + ".json")
-    with atomic_path(path) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(path, result)
     return path
 
 

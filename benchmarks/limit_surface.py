@@ -10,7 +10,6 @@ batch. Writes `limit_surface_<device>.json`.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import subprocess
@@ -108,10 +107,9 @@ def main(argv=None) -> int:
     }
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, f"limit_surface_{device.alias.replace(':', '')}.json")
-    from wavewarp.io import atomic_path
+    from wavewarp.io import write_json
 
-    with atomic_path(path) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(path, result)
     print(f"wrote {path}")
     return 0
 

@@ -14,7 +14,6 @@ solid, insensitive dashed). `--quick`: coarse meshes over 2.2 periods (a CPU smo
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -45,7 +44,7 @@ def main(argv=None) -> int:
     import warp as wp
 
     from wavewarp.device import resolve_device
-    from wavewarp.io import atomic_path
+    from wavewarp.io import write_json
     from wavewarp.walker import locomotion_png
 
     parser = argparse.ArgumentParser(prog="wavewarp bench locomotion", description=__doc__.split("\n")[0])
@@ -77,8 +76,7 @@ def main(argv=None) -> int:
     result = {"benchmark": "locomotion", "device": str(device), "device_name": wp.get_device(device).name,
               "host": platform.node(), "date": date.today().isoformat(), "quick": args.quick, "periods": periods,
               "runs": runs}  # fmt: skip
-    with atomic_path(os.path.join(args.out, "locomotion.json")) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(os.path.join(args.out, "locomotion.json"), result)
     locomotion_png(lines, os.path.join(args.out, "locomotion.png"),
                    title=f"walkers, {wp.get_device(device).name}: displacement against time (Fig. 3a)")  # fmt: skip
     print(f"wrote {os.path.join(args.out, 'locomotion.json')} and locomotion.png")

@@ -13,7 +13,6 @@ icosphere (ascidian parameters, SPEC §6). Writes `shell_<device>.json`.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -25,7 +24,7 @@ import warp as wp
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from numpy_shell import NumpyShell  # noqa: E402
 
-from wavewarp.io import atomic_path  # noqa: E402
+from wavewarp.io import write_json  # noqa: E402
 from wavewarp.mesh import icosphere  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
 
@@ -120,8 +119,7 @@ def main(argv=None) -> int:
                   warp=wp.config.version, parameters=PARAMETERS, forces=forces, relax=relax)  # fmt: skip
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, f"shell_{device.alias.replace(':', '')}.json")
-    with atomic_path(path) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(path, result)
     print(f"wrote {path}")
     return 0
 

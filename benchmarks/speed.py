@@ -21,7 +21,6 @@ the floor is the larger. Writes speed_<device>.json and speed_<device>.png.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -36,7 +35,7 @@ from numpy_shell import NumpyShell  # noqa: E402
 from wavewarp.coupled import Walking  # noqa: E402
 from wavewarp.device import resolve_device  # noqa: E402
 from wavewarp.dynamics import Ground, ShellDynamics  # noqa: E402
-from wavewarp.io import atomic_path  # noqa: E402
+from wavewarp.io import write_json, write_png  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
 from wavewarp.mesh import Mesh, icosphere  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
@@ -76,14 +75,16 @@ def seconds_per_call(call, device, budget: float, repeats: int = 5) -> float:
     return float(np.median(timings))
 
 
-def walker_shell(level: int, device, dtype, deterministic=False):
+def walker_shell(level: int, device, dtype, deterministic=False, volume=True):
+    """The sphere walker's shell on a level-`level` icosphere resting on the ground (volume=False:
+    without the volume penalty, the Koiter terms alone)."""
     mesh = icosphere(RADIUS, level)
     weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
     touching, depth = ground_lift(mesh, weight, WALKER["stiffness"])
     mesh = Mesh(mesh.vertices + [0.0, 0.0, touching - depth], mesh.triangles)
+    penalty = MU_V * WALKER["young"] * THICKNESS / RADIUS**4 if volume else 0.0
     shell = Shell(mesh, thickness=THICKNESS, young=WALKER["young"], poisson=WALKER["poisson"], AC=AC, AI=0.0,
-                  volume_penalty=MU_V * WALKER["young"] * THICKNESS / RADIUS**4, deterministic=deterministic,
-                  device=device, dtype=dtype)  # fmt: skip
+                  volume_penalty=penalty, deterministic=deterministic, device=device, dtype=dtype)  # fmt: skip
     return mesh, shell
 
 
@@ -149,15 +150,14 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     rng = np.random.default_rng(level)
     x = mesh.vertices * (1 + 0.01 * rng.standard_normal((mesh.n_vertices, 1)))
     c = rng.random(mesh.n_vertices)
-    shells = [("koiter forces, atomic scatter", shell)]
-    if level <= gather_max_level:
-        shells.append(("koiter forces, deterministic gather", walker_shell(level, device, dtype, deterministic=True)[1]))
-    for name, s in shells:
-        s.forces(x, c)
-        s.volume_penalty, penalty = 0.0, s.volume_penalty
-        rows.append(dict(kernel=name, seconds=seconds_per_call(lambda s=s: s.forces_device(s._x, s._forces), device,
-                                                               budget), **koiter_counts(s)))  # fmt: skip
-        s.volume_penalty = penalty
+    shells = [("koiter forces, atomic scatter", False)] + (
+        [("koiter forces, deterministic gather", True)] if level <= gather_max_level else [])  # fmt: skip
+    for name, deterministic in shells:
+        koiter = walker_shell(level, device, dtype, deterministic=deterministic, volume=False)[1]
+        koiter.forces(x, c)
+        rows.append(dict(kernel=name, seconds=seconds_per_call(lambda s=koiter: s.forces_device(s._x, s._forces),
+                                                               device, budget), **koiter_counts(koiter)))  # fmt: skip
+    shell.forces(x, c)
     rows.append(dict(kernel="shell forces (koiter + volume)",
                      seconds=seconds_per_call(lambda: shell.forces_device(shell._x, shell._forces), device, budget)))  # fmt: skip
     operator = LaplaceBeltrami(mesh, device=device, dtype=dtype)
@@ -253,9 +253,7 @@ def chart(result: dict, path: str) -> None:
     right.set_title("coupled walker steps")
     right.legend(fontsize=6)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    write_png(fig, path, dpi=110)
 
 
 def report(rows: list, peaks: dict) -> None:
@@ -308,8 +306,7 @@ def main(argv=None) -> int:
                   warp=wp.config.version, peaks=peaks, kernels=kernels, steps=steps)  # fmt: skip
     os.makedirs(args.out, exist_ok=True)
     stem = os.path.join(args.out, f"speed_{device.alias.replace(':', '')}")
-    with atomic_path(stem + ".json") as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(stem + ".json", result)
     chart(result, stem + ".png")
     print(f"wrote {stem}.json, {stem}.png")
     return 0

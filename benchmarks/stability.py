@@ -48,7 +48,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import json
 import math
 import os
 import platform
@@ -62,7 +61,7 @@ import scipy.sparse.linalg as sla
 import warp as wp
 
 from wavewarp.dynamics import ShellDynamics
-from wavewarp.io import atomic_path
+from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.shell import RelaxationError, Shell
@@ -320,17 +319,14 @@ def chart(result, path) -> None:
             panel.legend(fontsize=7)
     fig.suptitle(f"wavewarp stability, {result['device_name']} ({result['date']})")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    write_png(fig, path, dpi=110)
 
 
 def save_json(args, device, result) -> str:
     """Write the result (also after every row, so an interrupted run keeps its rows)."""
     name = f"stability_{device.alias.replace(':', '')}{'_quick' if args.quick else ''}"
     path = os.path.join(args.out, name + ".json")
-    with atomic_path(path) as tmp, open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
+    write_json(path, result)
     return path
 
 

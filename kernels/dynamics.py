@@ -5,12 +5,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-
-
-@wp.func
-def block_add(total: wp.array(dtype=Any), index: int, value: Any):
-    """total[index] += Σ value over the thread block (a shared-memory tile sum, one atomic per block)."""
-    wp.tile_atomic_add(total, wp.tile_sum(wp.tile(value, preserve_type=True)), offset=index)
+from .reduce import block_add
 
 
 @wp.kernel

@@ -11,6 +11,13 @@ from . import declare_overloads
 REDUCTION_BLOCK = wp.constant(256)
 
 
+@wp.func
+def block_add(total: wp.array(dtype=Any), index: int, value: Any):
+    """total[index] += Σ value over the thread block (a shared-memory tile sum, one atomic per block);
+    every thread of the block must call it (threads past the data pass a zero value)."""
+    wp.tile_atomic_add(total, wp.tile_sum(wp.tile(value, preserve_type=True)), offset=index)
+
+
 @wp.kernel
 def block_sum_kernel(values: wp.array(dtype=Any), total: wp.array(dtype=Any)):
     """total[0] += Σ values (zeroed by the caller); launched tiled, one thread block per REDUCTION_BLOCK values."""

@@ -85,16 +85,22 @@ def koiter_jet(
     ref_inv: Any,
     ref_metric: Any,
     ref_curvature: Any,
-    nu: Any,
 ):
-    """Strains of the limit surface at one point: E = ā⁻¹(a - ā), K = ā⁻¹(b - b̄), plus the jet."""
+    """Strains of the limit surface at one point: E = ā⁻¹(a - ā), K = ā⁻¹(b - b̄), plus the jet,
+    the unit normal n and the area element j = |x,1 × x,2|."""
     p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
     cross = wp.cross(x1, x2)
     j = wp.length(cross)
     n = cross / j
     membrane = ref_inv * (first_form(x1, x2) - ref_metric)
     bending = ref_inv * (second_form(n, x11, x12, x22) - ref_curvature)
-    return membrane, bending, x1, x2, x11, x12, x22, n, j
+    return membrane, bending, p, x1, x2, x11, x12, x22, n, j
+
+
+@wp.func
+def koiter_density(membrane: Any, bending: Any, stretching_modulus: Any, bending_modulus: Any, nu: Any):
+    """Stretching plus bending energy per reference area (SPEC §3)."""
+    return stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
 
 
 @wp.kernel
@@ -117,10 +123,10 @@ def koiter_energy_kernel(
     """(E_S + E_B) density × dω̄ at every point (SPEC §3), in float64; differentiable (autodiff path)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    membrane, bending, x1, x2, x11, x12, x22, n, j = koiter_jet(
-        x, patch_start, patch_vertices, basis, t, row, ref_metric_inv[q], ref_metric[q], ref_curvature[q], nu
+    membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
+        x, patch_start, patch_vertices, basis, t, row, ref_metric_inv[q], ref_metric[q], ref_curvature[q]
     )
-    density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
+    density = koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu)
     energy_density[q] = wp.float64(density * ref_weight[q])
 
 
@@ -188,20 +194,16 @@ def shell_forces_kernel(
         q = t * points_per_triangle + point
         row = triangle_type[t] * points_per_triangle + point
         inv = ref_metric_inv[q]
-        p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
-        cross = wp.cross(x1, x2)
-        j = wp.length(cross)
-        n = cross / j
-        membrane = inv * (first_form(x1, x2) - ref_metric[q])
-        bending = inv * (second_form(n, x11, x12, x22) - ref_curvature[q])
+        membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
+            x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
+        )
         w = ref_weight[q]
-        density = stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
-        energy_density[q] = wp.float64(density * w)
+        energy_density[q] = wp.float64(koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu) * w)
         g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bending, inv, w, stretching_modulus, bending_modulus, nu,
                                                     x1, x2, x11, x12, x22, n, j)  # fmt: skip
         scale = type(w)(pressure) * weights[point]
         r = p - centroid
-        g = scale * cross
+        g = scale * j * n
         g1 += scale * wp.cross(x2, r)
         g2 += scale * wp.cross(r, x1)
         if gather != 0:

@@ -359,7 +359,7 @@ def arrival_map_png(run, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .io import write_png
 
     net, mask, n0 = unfolded_net(run)
     arrival = run.arrival.time
@@ -379,9 +379,7 @@ def arrival_map_png(run, path) -> None:
     ax.set_title(f"{run.name} from the {run.p.get('origin', 'origin')}: arrival on the unfolded net\n"
                  "(dashed: eikonal circles s = γ t)")  # fmt: skip
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_png(fig, path)
 
 
 def face_heights(x, corners: dict) -> np.ndarray:
@@ -453,7 +451,7 @@ def imprint_png(run, path, faces, fronts) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .io import write_png
 
     name, corners, on = opposite_face(run, faces, fronts)
     axes, gu, gv, points, inside = face_grid(corners, 160)  # even: no sample on a mirror line, where fronts tie
@@ -475,9 +473,7 @@ def imprint_png(run, path, faces, fronts) -> None:
     ax.set_title(f"{run.name} from the {run.p.get('origin', 'origin')}: arrival on the {name} face\n"
                  f"white: the {len(np.unique(first[inside]))} exact first-arrival regions", fontsize=10)  # fmt: skip
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_png(fig, path)
 
 
 def box_wave_run(name: str, p: dict, make_box, origins: dict, *, faces=None, fronts=None, mesh=None, device=None,
@@ -582,7 +578,7 @@ def kymograph_png(run, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .io import write_png
 
     times = [t for t, _ in run.profiles]
     image = np.array([profile for _, profile in run.profiles]) / run.size
@@ -594,9 +590,7 @@ def kymograph_png(run, path) -> None:
     ax.set_ylabel("time")
     ax.set_title(f"{run.name}: curvature kymograph (paper Fig. 1c)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_png(fig, path)
 
 
 def frame_png(run, path) -> None:
@@ -608,7 +602,7 @@ def frame_png(run, path) -> None:
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     from .geometry import limit_positions
-    from .io import atomic_path
+    from .io import write_png
     from .usd import colour_map
 
     time, x, c = run.snapshot
@@ -630,9 +624,7 @@ def frame_png(run, path) -> None:
     ax.set_axis_off()
     ax.set_title(f"{run.name}, t = {time:.3g} (colour: c from 0 to {field.max():.2g})")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    write_png(fig, path, dpi=110)
 
 
 def symmetry_number(run, x, threshold=0.01) -> tuple:
@@ -673,7 +665,7 @@ def buckling_png(run, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .io import write_png
 
     fig, ax = plt.subplots(figsize=(5.5, 3.8))
     ax.plot([t for t, _ in run.profiles], [value[0] for _, value in run.profiles], "o-")
@@ -684,9 +676,7 @@ def buckling_png(run, path) -> None:
     ax.set_title(f"{run.name}: n-fold buckling (supplement Fig. S1a)")
     ax.legend()
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_png(fig, path)
 
 
 def seeded_noise(mesh: Mesh, amplitude: float, seed: int) -> np.ndarray:

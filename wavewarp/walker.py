@@ -11,7 +11,6 @@ and the speed in R per T along the direction of propagation (from the origin tow
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import warp as wp
@@ -259,7 +258,7 @@ def locomotion_png(runs, path, title: str = "walkers: displacement against time 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_path
+    from .io import write_png
 
     fig, ax = plt.subplots(figsize=(6, 4.2))
     for name, sensitive, trace, forward, radius in runs:
@@ -272,9 +271,7 @@ def locomotion_png(runs, path, title: str = "walkers: displacement against time 
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_png(fig, path)
 
 
 def sphere_walker_run(name: str, p: dict, *, mesh=None, device=None, model="koiter", report=print) -> WalkerRun:
