@@ -2,7 +2,7 @@
 
     wavewarp bench accuracy --device cpu --out benchmarks/results [--quick] [--cases ...]
 
-Four cases, each a sweep of settings; every point is (wall seconds of one computation, its error
+Five cases, each a sweep of settings; every point is (wall seconds of one computation, its error
 against the exact answer):
 
 * `spectrum`: the largest relative error of the 48 sphere eigenvalues l(l+1)/R², l = 1..6, of the
@@ -26,6 +26,12 @@ against the exact answer):
   level / divisions, rule, dt, dtype, discretisation and mass corrections. Arrival is the scenes'
   (`wavewarp.scene.ArrivalTimes`: half the first peak, field values sampled every 0.1 width/γ);
   error |v/γ − 1| for the speed v fitted to it. Cost: build, guard and steps (not the sampling).
+* `front`: the FitzHugh–Nagumo front on the sphere walker's rest sphere (R = 25, its kinetics, dt and
+  Gaussian start) against the continuum front speed of a 1-D lattice solve converged in h and dt
+  (SPEC §8 "FHN"; the bistable speed √(2γ²)(½ − ν) of w ≡ 0 beside it), over level, dtype and mass
+  corrections. Coarse lattices pin the front (propagation failure): a front that does not cross the
+  probes' window counts as speed 0, error 1. Error |v − v_ref| / v_ref for v fitted to the arrival
+  times of c = 0.5 at geodesic distances θ ∈ [π/4, 3π/4] from the origin. Cost: build, guard, steps.
 
 Every timed computation follows an untimed one of the same kind on the same mesh (kernels loaded,
 per-mesh patch tables cached, as in a scene after its first frame). Per configuration the points
@@ -60,11 +66,12 @@ from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import cube, icosphere, prism
 from wavewarp.quadrature import triangle_rule
-from wavewarp.scene import ArrivalTimes, load_scene, resolve
+from wavewarp.scene import ArrivalTimes, load_scene, mean_edge, resolve
 from wavewarp.shell import RelaxationError, Shell
-from wavewarp.waves import Telegraph, gaussian_pulse
+from wavewarp.walker import nearest_vertex
+from wavewarp.waves import FitzHughNagumo, Telegraph, gaussian_pulse
 
-CASES = ("spectrum", "telegraph", "radius", "arrival")
+CASES = ("spectrum", "telegraph", "radius", "arrival", "front")
 METHODS = (("subdivision", 0), ("subdivision", 2), ("p1", 0))  # (discretization, mass corrections)
 EXACT = np.concatenate([[l * (l + 1)] * (2 * l + 1) for l in range(7)])
 WIDTH = math.sqrt(2.0)  # the scenes' pulse width in length units (SPEC §5: σ² = 2/R²)
@@ -89,10 +96,10 @@ NEEDS = {  # scene: the (case, configuration) pairs that bound its accuracy
     "buckling-modes": (("arrival", "sphere"), ("radius", "buckling")),
     "cube-waves": (("arrival", "cube"), ("radius", "wave-guide")),
     "prism-waves": (("arrival", "cube"), ("radius", "wave-guide")),
-    "sphere-walker": (("spectrum", "sphere"), ("radius", "sphere-walker")),
-    "bilayer-walker": (("spectrum", "sphere"), ("radius", "bilayer-walker")),
-    "prism-walker": (("spectrum", "sphere"), ("radius", "box-walker")),
-    "cube-walker": (("spectrum", "sphere"), ("radius", "box-walker")),
+    "sphere-walker": (("spectrum", "sphere"), ("front", "sphere"), ("radius", "sphere-walker")),
+    "bilayer-walker": (("spectrum", "sphere"), ("front", "sphere"), ("radius", "bilayer-walker")),
+    "prism-walker": (("spectrum", "sphere"), ("front", "sphere"), ("radius", "box-walker")),
+    "cube-walker": (("spectrum", "sphere"), ("front", "sphere"), ("radius", "box-walker")),
 }
 TOLERANCES = {
     "arrival": (1e-2, "front speed to 1%: the oocytes' kymograph claim is a constant speed (measured 1.012 γ, "
@@ -102,16 +109,22 @@ TOLERANCES = {
                "1e-3 of the contraction |1 − λ|"),
     "spectrum": (1e-1, "FHN diffusion of the large-scale modes (l ≤ 6) to 10%: the pulse speed goes as "
                  "√(γ²λ), 5%"),
+    "front": (2e-1, "the walkers move with the travelling contraction (SPEC §6, Fig. 3a), so the FHN front must "
+              "travel: coarse lattices pin it (error 1); its speed v sets the contraction's wavelength vT, here "
+              "to 20%, what an affordable lumped level meets: 10% is missed at level 6 (11%) and met only with "
+              "mass corrections, which the walkers' FHN does not use; the walker's dt = 0.5 alone slows the "
+              "front by 5%"),
 }  # fmt: skip
-BOX_SPHERE = "a sphere with the box's h/R (R = L/2), at the icosphere level of the nearest vertex count"
+BOX_SPHERE = ("a sphere with the box's h/R (R: L/2 for the wave guides, the walker's own), at the icosphere "
+              "level whose mean control edge in R the box's matches (equivalent_level)")
+BOX_LEVEL = "the icosphere level whose mean control edge in R the box's matches (equivalent_level)"
 PROXIES = {  # (scene, configuration): what stands in for the scene's own geometry
     ("buckling-modes", "sphere"): "the oocyte pulse stands in for the steady tanh front (k = 1: as wide)",
     ("buckling-modes", "buckling"): "AI = 11 stands in for the default 10.5",
     ("prism-waves", "cube"): "the cube's net stands in for the prism's (same flat faces and rounded edges)",
     ("cube-waves", "wave-guide"): BOX_SPHERE, ("prism-waves", "wave-guide"): BOX_SPHERE,
     ("prism-walker", "box-walker"): BOX_SPHERE, ("cube-walker", "box-walker"): BOX_SPHERE,
-    ("prism-walker", "sphere"): "the icosphere of the nearest vertex count", ("cube-walker", "sphere"):
-        "the icosphere of the nearest vertex count",
+    ("prism-walker", "sphere"): BOX_LEVEL, ("cube-walker", "sphere"): BOX_LEVEL,
 }  # fmt: skip
 LABELS = {("subdivision", 0): "subdivision, lumped", ("subdivision", 2): "subdivision, p = 2", ("p1", 0): "P1"}
 
@@ -364,6 +377,126 @@ def arrival_point(device, configuration, size, rule, discretization, corrections
     return point
 
 
+# ---------------------------------------------------------------- case 5: FHN front speed
+
+
+@functools.lru_cache(maxsize=None)
+def walker_chemistry() -> dict:
+    """The sphere walker's R and FHN parameters, dt included (SPEC §5, §6; scenes/sphere_walker.py)."""
+    p = resolve(load_scene("sphere-walker").PARAMETERS)
+    return {name: p[name] for name in ("radius", "gamma", "nu", "kappa", "epsilon", "dt")}
+
+
+def front_speed_1d(h, gamma, nu, kappa, epsilon, dt=None, length=100.0, window=(30.0, 70.0)) -> float:
+    """The FHN front's speed on a 1-D lattice of spacing h on [0, length] (mirror ends; a Gaussian of
+    width 3 at x = 0, w = 0), second-order differences, explicit Euler (default dt = h²/(4γ²)): the
+    slope of x against c's upward 0.5 crossings (interpolated in the step) in `window`."""
+    x = np.arange(round(length / h) + 1) * h
+    dt, D = 0.25 * h * h / gamma**2 if dt is None else dt, gamma**2 / (h * h)
+    c, w, lap = np.exp(-((x / 3.0) ** 2) / 2), np.zeros_like(x), np.empty_like(x)
+    arrival, t = np.full(len(x), np.nan), 0.0
+    probes = (x >= window[0]) & (x <= window[1])
+    while np.isnan(arrival[probes]).any():
+        if t > 4 * length / (math.sqrt(2) * gamma * (0.5 - nu)):
+            raise RuntimeError(f"the 1-D FHN front did not cross x = {window[1]} (h = {h})")
+        lap[1:-1] = c[2:] - 2 * c[1:-1] + c[:-2]
+        lap[0], lap[-1] = 2 * (c[1] - c[0]), 2 * (c[-2] - c[-1])
+        new = c + dt * (D * lap + c * (1 - c) * (c - nu) - w)
+        w += dt * epsilon * (c - kappa * w)
+        up = np.isnan(arrival) & (c < 0.5) & (new >= 0.5)
+        arrival[up] = t + dt * (0.5 - c[up]) / (new[up] - c[up])
+        c, t = new, t + dt
+    return float(1 / np.polyfit(x[probes], arrival[probes], 1)[0])
+
+
+FRONT_SPACINGS = (0.2, 0.1, 0.05)  # 1-D reference lattices: h ≤ 0.1 mean edges of icosphere level 6 (R = 25)
+
+
+@functools.lru_cache(maxsize=None)
+def front_reference(epsilon=None) -> dict:
+    """The continuum front speed (SPEC §8 "FHN"): the 1-D lattice at FRONT_SPACINGS (dt ∝ h²),
+    Richardson-extrapolated; second order is checked (successive differences fall 3.5–4.5×). Beside
+    it the bistable speed √(2γ²)(½ − ν) of the front without w. `epsilon` overrides the walker's ε
+    (0: w ≡ 0, where the two must agree)."""
+    k = walker_chemistry()
+    eps = k["epsilon"] if epsilon is None else epsilon
+    speeds = [front_speed_1d(h, k["gamma"], k["nu"], k["kappa"], eps) for h in FRONT_SPACINGS]
+    ratio = (speeds[1] - speeds[0]) / (speeds[2] - speeds[1])
+    if not 3.5 < ratio < 4.5:
+        raise RuntimeError(f"the 1-D FHN front speeds {speeds} do not converge at second order (ratio {ratio:.2f})")
+    speed = speeds[2] + (speeds[2] - speeds[1]) / 3
+    return {"speed": speed, "epsilon": eps, "spacings": list(FRONT_SPACINGS), "speeds": speeds, "ratio": ratio,
+            "richardson": (speeds[2] - speeds[1]) / 3, "bistable": math.sqrt(2) * k["gamma"] * (0.5 - k["nu"])}  # fmt: skip
+
+
+def front_references() -> dict:
+    """The front case's reference, the 1-D solver's own check (w ≡ 0 against the bistable speed), and
+    the walker's time step's share: the 1-D front at its dt against the reference's finest dt, on the
+    finest lattice that dt keeps stable (h = 0.25: dt < 2 / (4γ²/h² + 1 − ν))."""
+    k = walker_chemistry()
+    reference = front_reference()
+
+    def at(dt):
+        return front_speed_1d(0.25, k["gamma"], k["nu"], k["kappa"], k["epsilon"], dt=dt)
+
+    finest = 0.25 * FRONT_SPACINGS[-1] ** 2 / k["gamma"] ** 2
+    return {**reference, "without_w": front_reference(0.0)["speed"], "time_step_share": at(k["dt"]) / at(finest) - 1}
+
+
+def front_point(device, level, corrections, dtype) -> dict:
+    """The sphere walker's first FHN front on its rest sphere (the insensitive twin's operator: rule 3,
+    assembled), started as the walker starts it (its Gaussian of 1.5 mean edges at the vertex nearest
+    -R x̂, w = 0, dt = the walker's). Probes: θ in [π/4, 3π/4] from the origin (the front's
+    geodesic curvature cot θ / R changes sign at the equator: its slowing D κ, ≤ 1.2%, averages out),
+    at distance r̄θ (r̄ the limit points' mean radius), arrival: c's first upward 0.5 crossing of the
+    limit values, interpolated between samples every time unit. The run ends when every probe has
+    fired, or at t = 2 s_max / v_ref: a front that has not crossed the window by then is slower than
+    half the reference (or pinned) and counts as stalled, speed 0 and error 1. `deviation`: the fit's
+    largest arrival-time residual; `reach_R`: the farthest fired node's distance."""
+    k = walker_chemistry()
+    R, reference = k["radius"], front_reference()["speed"]
+    mesh = sphere(R, level)
+    origin = nearest_vertex(mesh, [-R, 0.0, 0.0])
+    edge = mean_edge(mesh)
+    width = 1.5 * edge  # the walkers' default (wavewarp/walker.py)
+
+    def build():
+        op = LaplaceBeltrami(mesh, rule="3", assembled=True, device=device, dtype=dtype)
+        c0, _ = gaussian_pulse(op, origin, width / R, gamma=k["gamma"], radius=R)
+        return op, FitzHughNagumo(op, k["gamma"], k["nu"], k["kappa"], k["epsilon"], c0=c0, dt=k["dt"],
+                                  mass_corrections=corrections)  # fmt: skip
+
+    warm_up((id(mesh), "fhn", corrections, dtype), lambda: build()[1].advance(2))
+    start = time.perf_counter()
+    op, wave = build()
+    seconds = time.perf_counter() - start
+    p = op.points()
+    radii = np.linalg.norm(p, axis=1)
+    theta = np.arccos(np.clip(p @ p[origin] / (radii * radii[origin]), -1, 1))
+    probes, distance = (theta >= math.pi / 4) & (theta <= 3 * math.pi / 4), radii.mean() * theta
+    stride = max(1, round(1.0 / wave.dt))
+    previous, arrival = op.field_values(wave.concentration()), np.full(mesh.n_vertices, np.nan)
+    t_end = 2 * distance[probes].max() / reference
+    while wave.time < t_end and np.isnan(arrival[probes]).any():
+        start = time.perf_counter()
+        wave.advance(stride)
+        seconds += time.perf_counter() - start
+        now = op.field_values(wave.concentration())
+        up = np.isnan(arrival) & (previous < 0.5) & (now >= 0.5)
+        arrival[up] = wave.time - stride * wave.dt * (now[up] - 0.5) / (now[up] - previous[up])
+        previous = now
+    fired = ~np.isnan(arrival)
+    point = {"level": level, "vertices": mesh.n_vertices, **method_fields("subdivision", corrections, "3"), "dtype": dtype,
+             "dt": wave.dt, "steps": wave.steps, "seconds": seconds, "reference": reference, "mean_edge_R": edge / R,
+             "reach_R": float(distance[fired].max() / R) if fired.any() else 0.0, "stalled": not fired[probes].all(),
+             "speed": 0.0, "error": 1.0, "deviation": None}  # fmt: skip
+    if not point["stalled"]:
+        slope, offset = np.polyfit(distance[probes], arrival[probes], 1)
+        point.update(speed=float(1 / slope), error=float(abs(1 / slope - reference) / reference),
+                     deviation=float(np.abs(arrival[probes] - slope * distance[probes] - offset).max()))  # fmt: skip
+    return point
+
+
 # ---------------------------------------------------------------- sweeps
 
 
@@ -372,8 +505,10 @@ def sweeps(quick) -> dict:
     levels = [2, 3] if quick else [2, 3, 4]
     rules = ["3", "12"] if quick else ["3", "6", "7", "12"]
     dtypes = ["float32", "float64"]
+    walker_levels = [] if quick else [5]  # the walkers' level (case "front"): their own setting only
     spectrum = [(spectrum_point, (L, d, p, rule, dtype)) for L in levels for d, p in METHODS
                 for rule in (rules if d == "subdivision" else ["3"]) for dtype in dtypes]  # fmt: skip
+    spectrum += [(spectrum_point, (L, "subdivision", 0, "3", dtype)) for L in walker_levels for dtype in dtypes]
     fractions = [0.9, SCENE_DT] if quick else [0.9, SCENE_DT, 0.1]
     telegraph = {
         "modes": [(telegraph_point, ("modes", L, d, p, f, dtype)) for L in ([2, 3] if quick else [2, 3, 4, 5])
@@ -385,6 +520,8 @@ def sweeps(quick) -> dict:
     radius = {family: [(radius_point, (family, L, rule, dtype, tol)) for L in levels
                        for rule in rules + (["3x4"] if family == "wave-guide" else [])  # the box scenes' rule
                        for dtype in dtypes for tol in (tols if rule == "3" else [1.0])]
+                      + [(radius_point, (family, L, "3", dtype, 1.0)) for L in walker_levels if "walker" in family
+                         for dtype in dtypes]
               for family in FAMILIES}  # fmt: skip
     methods = [("subdivision", 0), ("p1", 0)] if quick else METHODS
     arrival = {
@@ -394,7 +531,9 @@ def sweeps(quick) -> dict:
                  for d, p in methods for rule in (["3"] if quick or d == "p1" else ["3", "3x4"])
                  for f in ([SCENE_DT] if quick else [0.9, SCENE_DT]) for dtype in dtypes],
     }  # fmt: skip
-    return {"spectrum": {"sphere": spectrum}, "telegraph": telegraph, "radius": radius, "arrival": arrival}
+    front = {"sphere": [(front_point, (L, p, dtype)) for L in ([3, 5] if quick else [3, 4, 5, 6])
+                        for p in ([0] if quick else [0, 2]) for dtype in dtypes]}  # fmt: skip
+    return {"spectrum": {"sphere": spectrum}, "telegraph": telegraph, "radius": radius, "arrival": arrival, "front": front}
 
 
 def pareto_front(points) -> list:
@@ -423,9 +562,41 @@ def mark_front(points) -> None:
 # ---------------------------------------------------------------- recommendations per scene
 
 
-def equivalent_level(vertices) -> int:
-    """The icosphere level (10·4^L + 2 vertices) nearest in log vertex count."""
-    return int(round(math.log((vertices - 2) / 10, 4)))
+@functools.lru_cache(maxsize=None)
+def icosphere_edge(level) -> float:
+    return mean_edge(sphere(1.0, level))
+
+
+def equivalent_level(mesh, radius) -> int:
+    """The finest icosphere level whose mean control edge, in units of its radius, is no shorter than
+    the mesh's in units of `radius`: the lumped operator's error on the modes λR² ≤ 42 (l ≤ 6 on the
+    sphere) goes with that edge, not with the vertex count, and so do the FHN front's pinning and
+    speed, set by γ²/h² (BENCHMARKS.md "Accuracy")."""
+    edge, level = mean_edge(mesh) / radius, 0
+    while icosphere_edge(level + 1) >= edge:
+        level += 1
+    return level
+
+
+def box_geometry(scene) -> tuple:
+    """A box scene's mesh maker, edge L and length unit R: the walkers' own (L_OVER_R in the
+    scene), L/2 for the wave guides (their radius proxy's inscribed sphere, BOX_SPHERE)."""
+    module = load_scene(scene)
+    edge = resolve(module.PARAMETERS)["edge"]
+    return (prism if "prism" in scene else cube), edge, edge / getattr(module, "L_OVER_R", 2.0)
+
+
+def box_level(scene, divisions) -> int:
+    make, edge, radius = box_geometry(scene)
+    return equivalent_level(make(edge, divisions), radius)
+
+
+def box_divisions(scene, level) -> int:
+    """The fewest (even) divisions at which the scene's box resolves `level` (equivalent_level)."""
+    divisions = 2
+    while box_level(scene, divisions) < level:
+        divisions += 2
+    return divisions
 
 
 def scene_setting(scene) -> dict:
@@ -435,18 +606,19 @@ def scene_setting(scene) -> dict:
     setting = {"dtype": p["dtype"], "rule": p.get("rule", "3"), "discretization": "subdivision"}
     if "level" in p:
         setting["level"] = p["level"]
-    else:  # a box: its (even) divisions, and the icosphere level of its vertex count for the sphere proxies
+    else:  # a box: its (even) divisions, and the icosphere level it resolves as well, for the sphere proxies
         divisions = p["divisions"] + p["divisions"] % 2
-        mesh = (prism if "prism" in scene else cube)(p["edge"], divisions)
-        setting.update(divisions=divisions, level=equivalent_level(mesh.n_vertices))
+        setting.update(divisions=divisions, level=box_level(scene, divisions))
     if walker:  # explicit FHN on the lumped mass (wavewarp/walker.py)
         setting.update(mass_corrections=0, tol_factor=1.0)
     else:
         setting.update(mass_corrections=p["mass_corrections"], dt_fraction=SCENE_DT if p["dt"] == 0 else None,
                        tol_factor=1.0 if p["relax_tol"] == 0 else None)  # fmt: skip
-    fixed = {"discretization"} | ({"rule"} if "rule" not in p else set())
+    # The relax tolerance stays the dtype's default: the uniform-c radius does not see a quasi-static path's
+    # sensitivity to it (ascidian, level 4, p = 2, t = 10: × 10 ends 0.46 R off float64, × 1 within 2e-3 R).
+    fixed = {"discretization", "tol_factor"} | ({"rule"} if "rule" not in p else set())
     if walker:  # FHN without mass corrections; the dynamics never relaxes: its radius is the default tolerance's
-        fixed |= {"mass_corrections", "tol_factor"}
+        fixed |= {"mass_corrections"}
     return {"setting": setting, "fixed": sorted(fixed)}
 
 
@@ -506,7 +678,8 @@ def recommend(results) -> list:
 def combined(recommendations) -> dict:
     """Per scene, one setting meeting every need: the largest level / divisions and mass corrections,
     the smallest dt and tolerance factors, the rule with the most points, float64 if any need asks for it.
-    Box scenes keep their own `divisions` (the icosphere level of their proxies is dropped)."""
+    Box scenes get `divisions` in place of their proxies' icosphere level: the most of their needs'
+    divisions and of the fewest that resolve that level (box_divisions)."""
     out = {}
     for r in recommendations:
         scene = out.setdefault(r["scene"], {})
@@ -524,9 +697,9 @@ def combined(recommendations) -> dict:
                 scene[axis] = "float64" if "float64" in (scene.get(axis), value) else "float32"
             elif axis == "rule":
                 scene[axis] = max(scene.get(axis, value), value, key=lambda rule: len(triangle_rule(rule)[1]))
-    for scene in out.values():
-        if "divisions" in scene:
-            scene.pop("level", None)
+    for name, scene in out.items():
+        if "level" in scene and "divisions" in scene_setting(name)["setting"]:
+            scene["divisions"] = max(scene.get("divisions", 2), box_divisions(name, scene.pop("level")))
     return out
 
 
@@ -541,7 +714,7 @@ def colour_key(case, point) -> str:
 
 
 def marker_key(case, point) -> str:
-    if case == "spectrum":
+    if case in ("spectrum", "front"):
         return f"L{point['level']}"
     if case == "radius":
         return f"L{point['level']}, tol × {point['tol_factor']:g}"
@@ -614,6 +787,7 @@ DESCRIPTIONS = {
     "telegraph": ("max |c − c_exact| / scale (Legendre series)", "seconds: build, initial data, guard, steps"),
     "radius": ("|r̄/R − λ| / |1 − λ| (closed-form E(λ))", "seconds: Shell build + relax"),
     "arrival": ("|v/γ − 1|, v fitted to the arrival times", "seconds: build, guard, steps"),
+    "front": ("|v − v_ref| / v_ref (1: the front stalls)", "seconds: build, guard, steps (the walker's dt = 0.5)"),
 }  # fmt: skip
 
 
@@ -645,6 +819,9 @@ def main(argv=None) -> int:
     for case in args.cases:
         error_label, cost = DESCRIPTIONS[case]
         block = {"error_label": error_label, "cost": cost, "configurations": {}}
+        if case == "front":
+            block["reference"] = front_references()
+            print(f"front reference: {json.dumps(block['reference'])}", flush=True)
         result["cases"][case] = block
         case_began = time.perf_counter()
         for configuration, jobs in plan[case].items():

@@ -11,8 +11,10 @@ h/R = 0.01, 0.084, 0.3, float64 (`--dtypes float32 float64` for both), `--parts`
 Measured bound: bisection on dt / predicted in [0.5, 2] down to `--resolution` (default 0.2% of
 the predicted bound). A trial runs a fixed number of steps with `check_dt=False` from a state
 that excites every mode, the highest included, and is *unstable* when the stepper raises
-BlowUpError or the watched deviation (max norm) grows past `growth` × its initial value; the
-measured bound is the largest dt found stable, the first unstable one is reported beside it.
+BlowUpError ("blow-up": NaN/Inf or past its blowup_limit), its OscillationError ("flip-flop": the
+FHN steppers' period-2 flip detector) or the watched deviation (max norm) grows past `growth` × its
+initial value ("growth"); the measured bound is the largest dt found stable, the first unstable one
+is reported beside it with the criterion that fired (`unstable_by`).
 
 * Telegraph leapfrog, γ = R = 1, α = 0.001 (subdivision with p = 0 and p = 2 mass corrections,
   P1): bound 2 / (γ sqrt(λ_max(M̃⁻¹K))); c0 random in [0, 1e-3], v0 = 0; watched c, growth 1000;
@@ -25,7 +27,9 @@ measured bound is the largest dt found stable, the first unstable one is reporte
   "excited": c0 = 1 + the same noise, ε = 0 so the state stays at the kinetic fixed point c = 1,
   where f'(1) = -L_f: the bound is sharp there. The fixed point attracts, so below the bound every
   deviation decays; past it the cubic reaction can hold the growing mode in a bounded, spurious
-  period-2 oscillation instead of blowing up, hence growth 2 (watched c - 1).
+  period-2 oscillation instead of blowing up, hence growth 2 (watched c - 1), kept as a backstop: the
+  steppers' flip detector (OscillationError) stops that oscillation once its increments pass 1e-3,
+  inside the chunk, so `unstable_by` reads "flip-flop" for the FHN rows (rest ones included).
 * FHN IMEX, excited state: bound 2 / L_f, no diffusive limit (only the uniform mode, λ = 0, can
   lose stability); also reported as a multiple of the explicit bound on the same mesh; 2000 steps.
 * Shell dynamics, symplectic Euler, no ground, no gravity, no damping: bound 2/ω, ω² = λ_max(M⁻¹H)
@@ -65,7 +69,7 @@ from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.shell import RelaxationError, Shell
-from wavewarp.waves import BlowUpError, FitzHughNagumo, Telegraph, gaussian_pulse
+from wavewarp.waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, gaussian_pulse
 
 NOISE = 1e-3  # amplitude of the random initial chemistry
 STEPS = {"telegraph": 2000, "fhn-explicit": 5000, "fhn-imex": 2000, "dynamics": 2000}
@@ -101,33 +105,38 @@ def reaction_slope(c, nu) -> float:
     return -3 * c * c + 2 * (1 + nu) * c - nu
 
 
-def runs_away(advance, watched, steps, growth) -> bool:
-    """True when `steps` steps (in chunks of CHUNK) raise BlowUpError or grow the max norm of
-    `watched()` past `growth` × its initial value."""
+def runs_away(advance, watched, steps, growth) -> str | None:
+    """Why `steps` steps (in chunks of CHUNK) are unstable: "flip-flop" (OscillationError), "blow-up"
+    (any other BlowUpError) or "growth" (the max norm of `watched()` past `growth` × its initial
+    value); None when they are stable."""
     start = np.abs(watched()).max()
     for _ in range(0, steps, CHUNK):
         try:
             advance(CHUNK)
+        except OscillationError:
+            return "flip-flop"
         except BlowUpError:
-            return True
+            return "blow-up"
         if not np.abs(watched()).max() <= growth * start:
-            return True
-    return False
+            return "growth"
+    return None
 
 
 def largest_stable(unstable, predicted, resolution) -> dict:
     """Bisection on dt / predicted in [0.5, 2] down to `resolution`: the largest ratio found stable
-    and the smallest found unstable (a result at 0.5 or 2 means the bracket missed)."""
-    low, high, trials = 0.5, 2.0, 0
+    and the smallest found unstable, with what made it unstable (`unstable(dt)`: a `runs_away`
+    reason or None; a result at 0.5 or 2 means the bracket missed)."""
+    low, high, trials, unstable_by = 0.5, 2.0, 0, None
     while high - low > resolution:
         ratio = 0.5 * (low + high)
         trials += 1
-        if unstable(ratio * predicted):
-            high = ratio
+        reason = unstable(ratio * predicted)
+        if reason:
+            high, unstable_by = ratio, reason
         else:
             low = ratio
     return {"measured_dt": low * predicted, "first_unstable_dt": high * predicted, "ratio": low, "trials": trials,
-            "bracket_missed": low == 0.5 or high == 2.0}  # fmt: skip
+            "unstable_by": unstable_by, "bracket_missed": low == 0.5 or high == 2.0}  # fmt: skip
 
 
 @functools.cache
@@ -364,8 +373,10 @@ def main(argv=None) -> int:
         "quick": args.quick,
         "resolution": resolution,
         "criterion": (f"bisection on dt / predicted bound in [0.5, 2] to {resolution:g}; a trial is unstable when it "
-                      "raises BlowUpError or the watched deviation (max norm) grows past `growth` x its initial value "
-                      f"within `steps` steps (both per row), checked every {CHUNK}; initial data random in [0, {NOISE:g}] "
+                      "raises BlowUpError ('blow-up'), its OscillationError (FHN's period-2 flip detector, 'flip-flop') or "
+                      "the watched deviation (max norm) grows past `growth` x its initial value ('growth') within `steps` "
+                      f"steps (both per row), checked every {CHUNK}; `unstable_by` names what fired at the first unstable dt; "
+                      f"initial data random in [0, {NOISE:g}] "
                       f"(FHN excited: 1 + that; dynamics: velocities, normal with deviation {args.velocity:g})"),
         "relax_note": ("Shell.relax is nonlinear CG with an Armijo line search: no time step, so no stability "
                        "bound; the rows report convergence (iterations to the default tolerance) instead"),
@@ -380,7 +391,7 @@ def main(argv=None) -> int:
                 "dynamics": f"h={row.get('thickness')}"}.get(row["method"], row.get("state"))  # fmt: skip
         print(f"{device.alias:7s} {row['method']:12s} {what:18s} L{row['level']} {row['vertices']:>6d} V {row['dtype']}: "
               f"predicted {row['predicted_dt']:.5g}  measured {row['measured_dt']:.5g}  ratio {row['ratio']:.4f}  "
-              f"({row['trials']} trials, {row['seconds']:.1f} s)", flush=True)  # fmt: skip
+              f"({row['trials']} trials, unstable by {row['unstable_by']}, {row['seconds']:.1f} s)", flush=True)  # fmt: skip
 
     def report_relax(r):
         result["relax"].append(r)

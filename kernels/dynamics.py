@@ -9,57 +9,52 @@ from .reduce import block_add
 
 
 @wp.kernel
-def momentum_kernel(
-    mass: wp.array(dtype=Any), x: wp.array(dtype=Any), v: wp.array(dtype=Any), momentum: wp.array(dtype=Any)
-):
-    """momentum += [Σ M_I v_I, Σ M_I x_I × v_I] (zeroed by the caller; launched on whole blocks)."""
-    i = wp.tid()
-    p = type(v[0])()
-    r = type(x[0])()
-    if i < x.shape[0]:
-        p = mass[i] * v[i]
-        r = x[i]
-    block_add(momentum, 0, p)
-    block_add(momentum, 1, wp.cross(r, p))
-
-
-@wp.kernel
 def rigid_sums_kernel(
-    forces: wp.array(dtype=Any), mass: wp.array(dtype=Any), x: wp.array(dtype=Any),
-    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any),
+    forces: wp.array(dtype=Any), mass: wp.array(dtype=Any), x: wp.array(dtype=Any), v: wp.array(dtype=Any),
+    with_momentum: int, sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any),
 ):  # fmt: skip
-    """sums += [Σ F, Σ x × F, Σ M x]; second_moment += Σ M x xᵀ (zeroed by the caller; launched on whole blocks)."""
+    """sums += [Σ F, Σ x × F, Σ M x, Σ M v, Σ M x × v] (the last two with_momentum); second_moment += Σ M x xᵀ.
+    Launched on whole blocks; `rigid_correction_kernel` consumes the sums and zeroes them."""
     i = wp.tid()
     f = type(forces[0])()
     r = type(x[0])()
+    p = type(v[0])()
     m = type(mass[0])(0.0)
     if i < x.shape[0]:
         f = forces[i]
         r = x[i]
         m = mass[i]
+        p = m * v[i]
     block_add(sums, 0, f)
     block_add(sums, 1, wp.cross(r, f))
     block_add(sums, 2, m * r)
     block_add(second_moment, 0, m * wp.outer(r, r))
+    if with_momentum != 0:  # uniform over the launch: every thread of a block calls block_add
+        block_add(sums, 3, p)
+        block_add(sums, 4, wp.cross(r, p))
 
 
 @wp.kernel
 def rigid_correction_kernel(
-    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any), momentum: wp.array(dtype=Any),
-    inverse_total_mass: Any, correction: wp.array(dtype=Any),
+    sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any), inverse_total_mass: Any,
+    correction: wp.array(dtype=Any),
 ):  # fmt: skip
-    """The rigid-body acceleration of the net force N and torque τ and the rigid-body velocity of the
-    momentum P and angular momentum L: [N/ΣM, α = I⁻¹τ, centre c, v̄ = P/ΣM, Ω = I⁻¹(L - c × P)]."""
+    """Single thread: the rigid-body acceleration of the net force N and torque τ and the rigid-body
+    velocity of the momentum P and angular momentum L: [N/ΣM, α = I⁻¹τ, centre c, v̄ = P/ΣM,
+    Ω = I⁻¹(L - c × P)]; then zeroes the sums for the next step (no memset per step)."""
     total = type(inverse_total_mass)(1.0) / inverse_total_mass
     c = inverse_total_mass * sums[2]
     torque = sums[1] - wp.cross(c, sums[0])
     S = second_moment[0] - total * wp.outer(c, c)
-    inertia = wp.trace(S) * wp.identity(n=3, dtype=type(inverse_total_mass)) - S
+    inertia = wp.inverse(wp.trace(S) * wp.identity(n=3, dtype=type(inverse_total_mass)) - S)
     correction[0] = inverse_total_mass * sums[0]
-    correction[1] = wp.inverse(inertia) * torque
+    correction[1] = inertia * torque
     correction[2] = c
-    correction[3] = inverse_total_mass * momentum[0]
-    correction[4] = wp.inverse(inertia) * (momentum[1] - wp.cross(c, momentum[0]))
+    correction[3] = inverse_total_mass * sums[3]
+    correction[4] = inertia * (sums[4] - wp.cross(c, sums[3]))
+    for k in range(5):
+        sums[k] = type(c)()
+    second_moment[0] = type(S)()
 
 
 @wp.kernel
@@ -68,20 +63,23 @@ def symplectic_euler_kernel(
     inverse_mass: wp.array(dtype=Any),
     rigid: wp.array(dtype=Any),
     damping: Any,
+    gravity: Any,
     dt: Any,
     x: wp.array(dtype=Any),
     v: wp.array(dtype=Any),
 ):
-    """v += dt (F/M - a_rigid - η (v - v_rigid)), then x += dt v.
+    """v += dt (F/M - g ẑ - a_rigid - η (v - v_rigid)), then x += dt v.
 
-    a_rigid = N/ΣM + α × (x - c) undoes the net force and torque of the internal forces' round-off
-    (zero in exact arithmetic; in float32 they would set a resting shell rolling); the damping acts
-    on the velocity relative to the rigid-body motion v_rigid = v̄ + Ω × (x - c), so it exerts no
-    net force and no torque (it keeps P and L, and lets a shell roll and slide freely).
+    Gravity M_I g on every control point is the uniform acceleration g. a_rigid = N/ΣM + α × (x - c)
+    undoes the net force and torque of the internal forces' round-off (zero in exact arithmetic; in
+    float32 they would set a resting shell rolling); the damping acts on the velocity relative to the
+    rigid-body motion v_rigid = v̄ + Ω × (x - c), so it exerts no net force and no torque (it keeps P
+    and L, and lets a shell roll and slide freely).
     """
     i = wp.tid()
     r = x[i] - rigid[2]
     accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], r)
+    accel[2] = accel[2] - gravity
     vi = v[i] + dt * (accel - damping * (v[i] - rigid[3] - wp.cross(rigid[4], r)))
     v[i] = vi
     x[i] = x[i] + dt * vi
@@ -120,13 +118,12 @@ def speed_runaway_kernel(v: wp.array(dtype=Any), limit: Any, flag: wp.array(dtyp
         flag[0] = 1
 
 
-declare_overloads(momentum_kernel, mass="scalar[]", x="vec3[]", v="vec3[]", momentum="vec3[]")
-declare_overloads(rigid_sums_kernel, forces="vec3[]", mass="scalar[]", x="vec3[]", sums="vec3[]",
+declare_overloads(rigid_sums_kernel, forces="vec3[]", mass="scalar[]", x="vec3[]", v="vec3[]", sums="vec3[]",
                   second_moment="mat33[]")  # fmt: skip
-declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]", momentum="vec3[]",
-                  inverse_total_mass="scalar", correction="vec3[]")  # fmt: skip
+declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]", inverse_total_mass="scalar",
+                  correction="vec3[]")  # fmt: skip
 declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]", damping="scalar",
-                  dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+                  gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3[]")
 declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar",
                   trace="scalar[,]")  # fmt: skip

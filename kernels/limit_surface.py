@@ -136,6 +136,29 @@ def limit_positions_kernel(
     limit[i] = s
 
 
+@wp.kernel
+def limit_motion_kernel(
+    x: wp.array(dtype=Any),
+    v: wp.array(dtype=Any),
+    ring_start: wp.array(dtype=wp.int32),
+    ring: wp.array(dtype=wp.int32),
+    centre_weight: wp.array(dtype=Any),
+    ring_weight: wp.array(dtype=Any),
+    p: wp.array(dtype=Any),
+    u: wp.array(dtype=Any),
+):
+    """Limit points p = L x and their velocities u = L v in one pass over the rings (SPEC §4, §8)."""
+    i = wp.tid()
+    sx = x[i] * centre_weight[i]
+    sv = v[i] * centre_weight[i]
+    for k in range(ring_start[i], ring_start[i + 1]):
+        j = ring[k]
+        sx += ring_weight[i] * x[j]
+        sv += ring_weight[i] * v[j]
+    p[i] = sx
+    u[i] = sv
+
+
 @wp.func
 def patch_scalar(
     c: wp.array(dtype=Any),
@@ -160,4 +183,7 @@ declare_overloads(
 )  # fmt: skip
 declare_overloads(
     limit_positions_kernel, x="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]", limit="vec3[]"
+)  # fmt: skip
+declare_overloads(
+    limit_motion_kernel, x="vec3[]", v="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]", p="vec3[]", u="vec3[]"
 )  # fmt: skip

@@ -16,10 +16,12 @@ import warp as wp
 
 from . import declare_overloads
 from .limit_surface import basis_row, first_form, patch_jet, patch_scalar, second_form
+from .reduce import block_add
 
 KOITER = wp.constant(0)
 BILAYER = wp.constant(1)
 MAX_PATCH = wp.constant(18)  # control vertices of a patch (valence N + 6): vertices of valence up to 12
+VolumeMoments = wp.types.vector(length=7, dtype=wp.float64)  # [S, ⅓ ∫ x·n dω, Σ x_I] (`volume_kernel`)
 
 
 @wp.kernel
@@ -167,17 +169,18 @@ def shell_forces_kernel(
     bending_modulus: Any,
     nu: Any,
     weights: wp.array(dtype=Any),
-    x_sum: wp.array(dtype=Any),
-    volume: wp.array(dtype=wp.float64),
+    moments: wp.array(dtype=VolumeMoments),
     target: wp.float64,
     penalty: wp.float64,
     gather: int,
+    with_energy: int,
     energy_density: wp.array(dtype=wp.float64),
     forces: wp.array(dtype=Any),
     jets: wp.array2d(dtype=Any),
 ):
-    """One thread per triangle: the energy density at its points and the exact forces
-    -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `volume` must hold V).
+    """One thread per triangle: the energy density at its points (`with_energy`) and the exact forces
+    -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `moments` must hold the
+    volume moments; the x̄ part comes from `volume_centroid_force`).
 
     Each point's gradient jet (g, g,1, g,2, g,11, g,12, g,22) is summed over the points into
     per-vertex accumulators and added to `forces` with one atomic per patch vertex; with
@@ -187,8 +190,8 @@ def shell_forces_kernel(
     t = wp.tid()
     start = patch_start[t]
     size = patch_start[t + 1] - start
-    centroid = type(x[0])(control_centroid(x_sum, x.shape[0]))
-    pressure = wp.float64(2.0) / wp.float64(3.0) * penalty * (volume[0] - target)
+    centroid = type(x[0])(moments_centroid(moments, x.shape[0]))
+    pressure = wp.float64(2.0) / wp.float64(3.0) * penalty * (volume_about_centroid(moments, x.shape[0]) - target)
     accumulated = wp.matrix(shape=(MAX_PATCH, 3), dtype=type(nu))  # one row per patch vertex
     for point in range(points_per_triangle):
         q = t * points_per_triangle + point
@@ -198,7 +201,8 @@ def shell_forces_kernel(
             x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
         )
         w = ref_weight[q]
-        energy_density[q] = wp.float64(koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu) * w)
+        if with_energy != 0:
+            energy_density[q] = wp.float64(koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu) * w)
         g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bending, inv, w, stretching_modulus, bending_modulus, nu,
                                                     x1, x2, x11, x12, x22, n, j)  # fmt: skip
         scale = type(w)(pressure) * weights[point]
@@ -214,14 +218,17 @@ def shell_forces_kernel(
             jets[q, 4] = g12
             jets[q, 5] = g22
         else:
-            for k in range(size):
-                b = basis[row, k]
-                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
-                for c in range(3):
-                    accumulated[k, c] = accumulated[k, c] - f[c]
+            for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
+                if k < size:
+                    b = basis[row, k]
+                    f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
+                    for c in range(3):
+                        accumulated[k, c] = accumulated[k, c] - f[c]
     if gather == 0:
-        for k in range(size):
-            wp.atomic_add(forces, patch_vertices[start + k], type(x[0])(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2]))
+        for k in range(wp.static(MAX_PATCH)):
+            if k < size:
+                force = type(x[0])(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2])
+                wp.atomic_add(forces, patch_vertices[start + k], force)
 
 
 @wp.kernel
@@ -232,8 +239,21 @@ def sum_kernel(values: wp.array(dtype=Any), total: wp.array(dtype=Any)):
 
 
 @wp.func
-def control_centroid(x_sum: wp.array(dtype=Any), n_vertices: int):
-    return wp.vec3d(x_sum[0]) / wp.float64(n_vertices)
+def moments_centroid(moments: wp.array(dtype=VolumeMoments), n_vertices: int):
+    m = moments[0]
+    return wp.vec3d(m[4], m[5], m[6]) / wp.float64(n_vertices)
+
+
+@wp.func
+def moments_normal_sum(moments: wp.array(dtype=VolumeMoments)):
+    m = moments[0]
+    return wp.vec3d(m[0], m[1], m[2])
+
+
+@wp.func
+def volume_about_centroid(moments: wp.array(dtype=VolumeMoments), n_vertices: int):
+    """V = ⅓ ∫ (x - x̄)·n dω = V₀ - x̄·S: exactly translation invariant (docs/shell.md)."""
+    return moments[0][3] - wp.dot(moments_centroid(moments, n_vertices), moments_normal_sum(moments))
 
 
 @wp.kernel
@@ -245,40 +265,56 @@ def volume_kernel(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
-    x_sum: wp.array(dtype=Any),
-    volume_terms: wp.array(dtype=wp.float64),
-    normal_terms: wp.array(dtype=wp.vec3d),
+    reduce: int,
+    terms: wp.array(dtype=VolumeMoments),
+    moments: wp.array(dtype=VolumeMoments),
 ):
-    """Terms of V = ⅓ ∫ (x - x̄)·n dω (SPEC §3), x̄ = Σx/N the control centroid, which makes the
-    quadrature exactly translation invariant; and of S = ⅓ ∫ n dω, needed for ∂V/∂x̄."""
-    q = wp.tid()
-    t, row = basis_row(triangle_type, points_per_triangle, q)
-    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
-    area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
-    volume_terms[q] = wp.dot(wp.vec3d(p) - control_centroid(x_sum, x.shape[0]), area_normal)
-    normal_terms[q] = area_normal
+    """Item i's share of the volume moments [S, V₀, Σx] (float64; launched over max(points,
+    vertices)): quadrature point i's terms of S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω, and control point
+    i's of Σx (SPEC §3); then V = V₀ - x̄·S about the control centroid (`volume_about_centroid`).
+    Written to `terms`, for a fixed-order or differentiable sum; or, with `reduce`, added to
+    moments[0] (zeroed by the caller; launched on whole blocks, one atomic per block)."""
+    i = wp.tid()
+    area_normal = wp.vec3d()
+    moment = wp.float64(0.0)
+    xi = wp.vec3d()
+    if i < triangle_type.shape[0] * points_per_triangle:
+        t, row = basis_row(triangle_type, points_per_triangle, i)
+        p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+        area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[i % points_per_triangle]) / wp.float64(3.0))
+        moment = wp.dot(wp.vec3d(p), area_normal)
+    if i < x.shape[0]:
+        xi = wp.vec3d(x[i])
+    m = VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2])
+    if reduce != 0:  # uniform over the launch: every thread of a block calls block_add
+        block_add(moments, 0, m)
+    else:
+        terms[i] = m
 
 
-@wp.kernel
-def volume_energy_kernel(volume: wp.array(dtype=wp.float64), target: wp.float64, penalty: wp.float64,
-                         energy: wp.array(dtype=wp.float64)):  # fmt: skip
-    """E_V = μV (V - V̄)² added to energy[0] (single thread; global sums are float64)."""
-    d = volume[0] - target
-    wp.atomic_add(energy, 0, penalty * d * d)
+@wp.func
+def volume_centroid_force(moments: wp.array(dtype=VolumeMoments), n_vertices: int, target: wp.float64,
+                          penalty: wp.float64):  # fmt: skip
+    """The x̄ part of -∂E_V/∂x_I, the same on every vertex: 2 μV (V - V̄) S / N."""
+    d = volume_about_centroid(moments, n_vertices) - target
+    return moments_normal_sum(moments) * (wp.float64(2.0) * penalty * d / wp.float64(n_vertices))
 
 
 @wp.kernel
 def volume_centroid_forces_kernel(
-    volume: wp.array(dtype=wp.float64),
-    normal_sum: wp.array(dtype=wp.vec3d),
-    target: wp.float64,
-    penalty: wp.float64,
-    forces: wp.array(dtype=Any),
-):
-    """The x̄ part of -∂E_V/∂x_i: + 2 μV (V - V̄) S / N on every vertex."""
+    moments: wp.array(dtype=VolumeMoments), target: wp.float64, penalty: wp.float64, forces: wp.array(dtype=Any)
+):  # fmt: skip
+    """forces = the x̄ part of -∂E_V/∂x (overwritten: it starts the atomic scatter's sum)."""
     i = wp.tid()
-    f = normal_sum[0] * (wp.float64(2.0) * penalty * (volume[0] - target) / wp.float64(forces.shape[0]))
-    forces[i] = forces[i] + type(forces[i])(f)
+    forces[i] = type(forces[i])(volume_centroid_force(moments, forces.shape[0], target, penalty))
+
+
+@wp.kernel
+def volume_energy_kernel(moments: wp.array(dtype=VolumeMoments), n_vertices: int, target: wp.float64,
+                         penalty: wp.float64, energy: wp.array(dtype=wp.float64)):  # fmt: skip
+    """E_V = μV (V - V̄)² added to energy[0] (single thread; global sums are float64)."""
+    d = volume_about_centroid(moments, n_vertices) - target
+    wp.atomic_add(energy, 0, penalty * d * d)
 
 
 @wp.kernel
@@ -291,12 +327,18 @@ def gather_forces_kernel(
     triangle_type: wp.array(dtype=wp.int32),
     basis: wp.array2d(dtype=Any),
     points_per_triangle: int,
+    moments: wp.array(dtype=VolumeMoments),
+    target: wp.float64,
+    penalty: wp.float64,
     forces: wp.array(dtype=Any),
 ):
     """Deterministic forces (overwritten): vertex I gathers -Σ N_I,· · (g, g1, g2, g11, g12, g22) over the quadrature
-    points of every patch it belongs to, in a fixed order (no atomics; bitwise reproducible)."""
+    points of every patch it belongs to, in a fixed order (no atomics; bitwise reproducible), plus the
+    volume's x̄ part."""
     i = wp.tid()
     f = type(forces[i])()
+    if penalty > wp.float64(0.0):
+        f = type(forces[i])(volume_centroid_force(moments, forces.shape[0], target, penalty))
     for e in range(vertex_entry_start[i], vertex_entry_start[i + 1]):
         entry = vertex_entries[e]
         t = entry_triangle[entry]
@@ -324,12 +366,11 @@ declare_overloads(
     AC="scalar", AI="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE,
 )  # fmt: skip
 declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
-declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", forces="vec3[]", jets="vec3[,]",
+declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", jets="vec3[,]",
                   **_PATCH, **_REFERENCE, **_MODULI)  # fmt: skip
-declare_overloads(volume_kernel, x="vec3[]", weights="scalar[]", x_sum="vec3[]", **_PATCH)
+declare_overloads(volume_kernel, x="vec3[]", weights="scalar[]", **_PATCH)
 declare_overloads(volume_centroid_forces_kernel, forces="vec3[]")
 declare_overloads(gather_forces_kernel, jets="vec3[,]", forces="vec3[]", **_PATCH)
 declare_overloads(negate_kernel, a="vec3[]", out="vec3[]")
-declare_overloads(sum_kernel, values="vec3[]", total="vec3[]")  # control-point sums (centroid)
 wp.overload(sum_kernel, {"values": wp.array(dtype=wp.float64), "total": wp.array(dtype=wp.float64)})
-wp.overload(sum_kernel, {"values": wp.array(dtype=wp.vec3d), "total": wp.array(dtype=wp.vec3d)})
+wp.overload(sum_kernel, {"values": wp.array(dtype=VolumeMoments), "total": wp.array(dtype=VolumeMoments)})

@@ -4,7 +4,9 @@ Telegraph `c_tt + α c_t = γ² Δ c` (leapfrog with centred damping), FitzHugh�
 `c_t = γ² Δ c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (explicit Euler, and IMEX Euler whose
 implicit diffusion is solved by the Jacobi-preconditioned conjugate gradients below).
 Here `acceleration` is the diffusion term's `M̃⁻¹ K c` (wavewarp/waves.py builds it), so the
-kernels below see only per-vertex numbers. Reductions sum interleaved strides per thread and
+kernels below see only per-vertex numbers. One int32 flag per stepper, read once per chunk
+(SPEC §8), says what failed: RUNAWAY (NaN/Inf or past the limit) or FLIP_FLOP (FHN's bounded
+period-2 oscillation past its time-step bound). Reductions sum interleaved strides per thread and
 add the partial sums atomically: no tile kernels, no host round-trips, graph-capturable.
 """
 
@@ -13,6 +15,9 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
+
+RUNAWAY = wp.constant(1)  # flag codes; a later RUNAWAY overwrites FLIP_FLOP
+FLIP_FLOP = wp.constant(2)
 
 
 @wp.kernel
@@ -64,10 +69,33 @@ def fhn_inhibitor_kernel(c: wp.array(dtype=Any), epsilon: Any, kappa: Any, dt: A
 
 @wp.kernel
 def runaway_kernel(values: wp.array(dtype=Any), limit: Any, flag: wp.array(dtype=wp.int32)):
-    """flag = 1 where |value| > limit or value is NaN/Inf (NaN fails every comparison)."""
+    """flag = RUNAWAY where |value| > limit or value is NaN/Inf (NaN fails every comparison)."""
     i = wp.tid()
     if not (wp.abs(values[i]) <= limit):
-        flag[0] = 1
+        flag[0] = RUNAWAY
+
+
+@wp.kernel
+def flip_kernel(
+    c: wp.array(dtype=Any), floor: Any, hold: Any, steps: int,
+    previous: wp.array(dtype=Any), increment: wp.array(dtype=Any), earlier: wp.array(dtype=Any),
+    streak: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    """Period-2 flip-flop detector, after each step (SPEC §8): d = c^{n+1} - c^n counts when it
+    flips sign against d^n, |d| > floor (not round-off) and |d| >= hold |d^{n-1}| (not a decaying
+    transient); `steps` counts in a row set flag = FLIP_FLOP. Keeps c^{n+1}, d, d^n for the next step."""
+    i = wp.tid()
+    ci = c[i]
+    d = ci - previous[i]
+    last = increment[i]
+    flipped = d * last < type(d)(0.0) and wp.abs(d) > floor and wp.abs(d) >= hold * wp.abs(earlier[i])
+    count = wp.where(flipped, streak[i] + 1, 0)
+    if count >= steps:
+        flag[0] = FLIP_FLOP
+    streak[i] = count
+    previous[i] = ci
+    earlier[i] = last
+    increment[i] = d
 
 
 # ---------------------------------------------------------------- linear algebra on the device
@@ -150,6 +178,7 @@ declare_overloads(fhn_explicit_kernel, acceleration=_S, gamma2="scalar", nu="sca
 declare_overloads(fhn_imex_rhs_kernel, c=_S, w=_S, mass=_S, nu="scalar", dt="scalar", rhs=_S)
 declare_overloads(fhn_inhibitor_kernel, c=_S, epsilon="scalar", kappa="scalar", dt="scalar", w=_S)
 declare_overloads(runaway_kernel, values=_S, limit="scalar")
+declare_overloads(flip_kernel, c=_S, floor="scalar", hold="scalar", previous=_S, increment=_S, earlier=_S)
 declare_overloads(shifted_operator_kernel, x=_S, Kx=_S, mass=_S, shift="scalar", out=_S)
 declare_overloads(inverse_diagonal_kernel, mass=_S, K_diagonal=_S, shift="scalar", out=_S)
 declare_overloads(cg_start_kernel, b=_S, Ax=_S, inverse_diagonal=_S, r=_S, z=_S, p=_S)

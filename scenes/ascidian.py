@@ -10,7 +10,7 @@ PARAMETERS = {
     "AI": Param(1.6, "curvature coupling (SPEC §6)"),
     "mu_v": Param(24.0, "volume penalty μV in units of Y h / R⁴ (SPEC §6)", minimum=0.0),
 }
-QUICK = {"level": 3, "frames": 4, "t_end": 4.0}
+QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3, coarser than the default
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

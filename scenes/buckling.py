@@ -14,7 +14,7 @@ PARAMETERS = {
     "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
     "noise": Param(1e-4, "position noise / R: the tiny seeded perturbation that breaks the symmetry", minimum=0.0),
 }
-QUICK = {"level": 3, "frames": 4, "t_end": 4.0}
+QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3, coarser than the default
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

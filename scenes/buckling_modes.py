@@ -18,8 +18,11 @@ PARAMETERS = {
     "k": Param(1.0, "front steepness k (1/length): the front is ~2/k = 2 length units wide, as the oocyte pulse",
                positive=True),
     "delta": Param(0.0, "front height δ below the pole (length); 0 = R/2, between pole and equator", minimum=0.0),
+    # SPEC §6, §7 (Fig. S1b): above the wave checks' level 3 (BENCHMARKS.md "Accuracy"), for the buckling wavelength
+    "level": Param(4, "icosphere level: the buckling wavelength 2π√(Rh)/(12(1−ν²))^¼ = 7.8 at h/R = 0.05 (3.5 at "
+                   "0.01) spans 10 (4.6) control edges; level 3 gives 5 (2.3)", minimum=1),
 }
-QUICK = {"level": 3, "frames": 4, "t_end": 4.0}
+QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3, coarser than the default
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

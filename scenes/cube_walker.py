@@ -6,6 +6,7 @@ from wavewarp.walker import box_walker_run, walker_parameters
 
 NAME = "cube-walker"
 DESCRIPTION = "cube walker, edge 2R (R = 25), h = 0.084R: FHN waves from a top edge, AC = 0.2, μV = 6.4 Yh/L⁴ (Video 7)"
+L_OVER_R = 2.0  # the edge in units of R (the speed's length unit): 2R, the sphere walker's height
 ORIGINS = {  # in units of L, the cube resting on a face
     "edge": (-0.5, 0.0, 0.5),  # the midpoint of the back top edge
     "face": (-0.5, 0.0, 0.0),  # the centre of the back face
@@ -17,13 +18,15 @@ PARAMETERS = walker_parameters(
     AI=Param(0.0, "curvature coupling (SPEC §6)"),
     mu_v=Param(6.4, "volume penalty μV in units of Y h / L⁴ (ours: 0.4 Y h / R⁴ with R = L/2, as the other walkers)",
                minimum=0.0),  # fmt: skip
-    divisions=Param(8, "control squares per face edge (even): 768 triangles, control edge 0.25 R", minimum=2),
+    # SPEC §6; BENCHMARKS.md "Accuracy": the level-5 FHN front at 0.115 (17% slow); 32 divisions (level 4) pin it
+    divisions=Param(62, "control squares per face edge (even): 46,128 triangles, mean control edge 0.037 R, the "
+                    "sphere walker's level 5 resolution (benchmarks/accuracy.py equivalent_level)", minimum=2),
     rule=Param("3", "quadrature: the 3-point rule (as the prism walker)"),
     origin=Param("edge", "where the first pulse starts", choices=tuple(ORIGINS)),
 )
-QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}
+QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}  # --quick: coarser smoke test, 4 divisions (192 triangles; front pins)
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     del seed  # deterministic
-    return box_walker_run(NAME, p, cube, ORIGINS, radius=p["edge"] / 2, mesh=mesh, device=device, report=report)
+    return box_walker_run(NAME, p, cube, ORIGINS, radius=p["edge"] / L_OVER_R, mesh=mesh, device=device, report=report)

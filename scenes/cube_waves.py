@@ -7,7 +7,8 @@ NAME = "cube-waves"
 DESCRIPTION = "cube wave guide, L = 20h: telegraph wave from a face centre, an edge or a vertex, AC = 0.2 (Fig. 2)"
 ORIGINS = {"face": (0.0, 0.0, 0.5), "edge": (0.5, 0.0, 0.5), "vertex": (0.5, 0.5, 0.5)}  # in units of L
 PARAMETERS = {**BOX_PARAMETERS, "origin": Param("face", "where the pulse starts", choices=tuple(ORIGINS))}
-QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}
+QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}  # --quick: a smoke test, coarser than the default
+
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     del seed  # the box scenes are deterministic

@@ -15,7 +15,7 @@ ORIGINS = {  # in units of L; the triangular caps lie at z = ±L/2, one corner t
     "vertex": (0.0, _R, 0.5),
 }
 PARAMETERS = {**BOX_PARAMETERS, "origin": Param("face", "where the pulse starts", choices=tuple(ORIGINS))}
-QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}
+QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}  # --quick: a smoke test, coarser than the default
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

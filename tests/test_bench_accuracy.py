@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from wavewarp.benchmarks.accuracy import FAMILIES, closed_form_stretch, telegraph_modes
+from wavewarp.benchmarks.accuracy import FAMILIES, closed_form_stretch, front_reference, telegraph_modes
 from wavewarp.cli import main as cli
 from wavewarp.cli import scene_descriptions
 
 CONFIGURATIONS = {"spectrum": {"sphere"}, "telegraph": {"modes", "pulse"}, "radius": set(FAMILIES),
-                  "arrival": {"sphere", "cube"}}  # fmt: skip
+                  "arrival": {"sphere", "cube"}, "front": {"sphere"}}  # fmt: skip
 SETTING = ("level", "divisions", "rule", "discretization", "mass_corrections", "dt_fraction", "tol_factor")
 
 
@@ -81,11 +81,11 @@ def test_errors_fall_as_the_level_rises(bench):
 
 def test_float32_errors_stay_within_stated_bounds_of_float64(bench):
     """float32 round-off is far below the discretisation errors: the float32-built operator has the
-    same spectrum to 1e-3 of its error, the waves' errors agree to 1e-3 (of the scale, and of γ), and
-    the float32 radius lies within 1e-4 R of the float64 one (ten times the float32 relax tolerance,
-    a residual strain of 1e-5)."""
+    same spectrum to 1e-3 of its error, the waves' errors agree to 1e-3 (of the scale, of γ, of the
+    FHN front's v_ref), and the float32 radius lies within 1e-4 R of the float64 one (ten times the
+    float32 relax tolerance, a residual strain of 1e-5)."""
     _, result = bench
-    for case in ("spectrum", "telegraph", "arrival", "radius"):
+    for case in ("spectrum", "telegraph", "arrival", "radius", "front"):
         for name, points in points_of(result, case):
             pairs = pairs_by_dtype(points)
             assert pairs, (case, name)
@@ -96,6 +96,29 @@ def test_float32_errors_stay_within_stated_bounds_of_float64(bench):
                     assert abs(single["error"] - double["error"]) * abs(1 - double["stretch"]) <= 1e-4
                 else:
                     assert abs(single["error"] - double["error"]) <= 1e-3, (case, name, single, double)
+
+
+def test_the_1d_front_reference_is_the_bistable_speed_without_w():
+    """SPEC §8 "FHN": with w ≡ 0 the converged 1-D lattice front runs at the Nagumo front's
+    √(2γ²)(½ − ν) (measured 2e-5); the reference checks its own second-order convergence in h."""
+    bare = front_reference(0.0)
+    assert bare["speed"] == pytest.approx(bare["bistable"], rel=1e-3)
+    assert 3.5 < bare["ratio"] < 4.5 and abs(bare["richardson"]) < 5e-3 * bare["speed"]
+
+
+def test_the_front_case_reports_stalls_and_a_travelling_front(bench):
+    """Quick sweep (levels 3 and 5, lumped): every point is measured against the bench's 1-D
+    reference; a stalled front is speed 0 and error 1 (no crash); level 5, where the lattice no
+    longer pins the front (docs/walkers.md), travels: 0 < error < 1."""
+    _, result = bench
+    block = result["cases"]["front"]
+    assert block["reference"]["speed"] == pytest.approx(front_reference()["speed"], rel=1e-12)
+    (_, points), = points_of(result, "front")
+    for p in points:
+        assert p["reference"] == block["reference"]["speed"]
+        assert p["stalled"] == (p["speed"] == 0.0 and p["error"] == 1.0), p
+    fine = [p for p in points if p["level"] == 5]
+    assert fine and all(not p["stalled"] and 0 < p["error"] < 1 for p in fine)
 
 
 def test_the_closed_form_radius_solves_the_cubic_without_volume_term():

@@ -159,8 +159,9 @@ def test_every_walker_runs_quick(scene, tmp_path, capsys):
     assert np.linalg.norm(result["displacement"]) > 0 and abs(result["lateral_R"]) < 0.1 * abs(result["distance_R"])
 
 
-def small_walking(check_every, speed_limit=None, sensitive=True):
-    """A level-1 ball on the ground with an FHN pulse, coupled as the walkers are (float64, CPU)."""
+def small_walking(check_every, speed_limit=None, sensitive=True, make_wave=None):
+    """A level-1 ball on the ground with an FHN pulse (or `make_wave(operator)`), coupled as the
+    walkers are (float64, CPU)."""
     from wavewarp.coupled import Walking
     from wavewarp.dynamics import Ground, ShellDynamics
     from wavewarp.laplace import LaplaceBeltrami
@@ -173,8 +174,11 @@ def small_walking(check_every, speed_limit=None, sensitive=True):
     shell = Shell(mesh, thickness=0.1, young=50.0, AC=0.2, volume_penalty=5.0, device="cpu", dtype="float64")
     dynamics = ShellDynamics(shell, density=1.0, gravity=0.5, ground=Ground(), damping=0.2, speed_limit=speed_limit)
     operator = LaplaceBeltrami(mesh, mesh.vertices, device="cpu", dtype="float64")
-    c0, _ = gaussian_pulse(operator, 0, 0.3, gamma=0.2, radius=1.0)
-    wave = FitzHughNagumo(operator, 0.2, c0=c0, dt=0.05)
+    if make_wave is None:
+        c0, _ = gaussian_pulse(operator, 0, 0.3, gamma=0.2, radius=1.0)
+        wave = FitzHughNagumo(operator, 0.2, c0=c0, dt=0.05)
+    else:
+        wave = make_wave(operator)
     return Walking(dynamics, wave, sensitive=sensitive, check_every=check_every)
 
 
@@ -206,3 +210,26 @@ def test_walking_blow_up_restores_the_chunk_start():
     after = [a.numpy() for a in (run.dynamics.x, run.dynamics.v, run.wave.c, run.wave.w)]
     assert all(np.array_equal(a, b) for a, b in zip(before, after))
     assert run.wave.steps == 0 and run.dynamics.steps == 0
+
+
+def test_walking_stops_a_wave_flip_flop_and_restores_the_chunk_start():
+    """The wave's flip detector runs inside the coupled steps: FHN at 1.01 × its bound (c = 1, ε = 0,
+    where the cubic holds the unstable mode in a bounded period-2 flip-flop) stops the coupled run
+    with OscillationError naming the coupling; the state is the one a twin run reaches at the
+    failed chunk's start, and the clocks stay there."""
+    from wavewarp.waves import FitzHughNagumo, OscillationError
+
+    def flipping(operator):
+        c0 = 1 + 1e-3 * np.random.default_rng(1).uniform(0.0, 1.0, operator.n_vertices)
+        bound = FitzHughNagumo(operator, 1.0, epsilon=0.0, c0=c0).stable_dt
+        return FitzHughNagumo(operator, 1.0, epsilon=0.0, c0=c0, dt=1.01 * bound, check_dt=False)
+
+    run = small_walking(check_every=10, make_wave=flipping)
+    with pytest.raises(OscillationError, match="coupled to the .* period-2 flip-flop .* state is restored"):
+        run.advance(500)
+    twin = small_walking(check_every=10, make_wave=flipping).advance(run.wave.steps)
+    for a, b in ((run.dynamics.x, twin.dynamics.x), (run.dynamics.v, twin.dynamics.v), (run.wave.c, twin.wave.c),
+                 (run.wave.w, twin.wave.w)):  # fmt: skip
+        assert np.array_equal(a.numpy(), b.numpy())
+    assert run.wave.steps > 0 and run.dynamics.steps == run.wave.steps * run.substeps  # good chunks kept
+    assert run.time == pytest.approx(twin.time, rel=1e-12)

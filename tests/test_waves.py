@@ -16,7 +16,18 @@ from scipy.optimize import minimize_scalar
 
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import cube, icosphere
-from wavewarp.waves import BlowUpError, FitzHughNagumo, Telegraph, gaussian_pulse, steady_front
+from wavewarp.kernels.waves import FLIP_FLOP, flip_kernel
+from wavewarp.waves import (
+    FLIP_FLOOR,
+    FLIP_HOLD,
+    FLIP_STEPS,
+    BlowUpError,
+    FitzHughNagumo,
+    OscillationError,
+    Telegraph,
+    gaussian_pulse,
+    steady_front,
+)
 
 F64 = dict(device="cpu", dtype="float64")
 
@@ -226,6 +237,104 @@ def test_blow_up_stops_with_a_clear_error_and_keeps_the_last_finite_state(rng):
     assert np.all(np.isfinite(wave.concentration())) and np.all(np.isfinite(wave.velocity()))
     assert error.value.steps == wave.steps and error.value.time == wave.time
     assert np.abs(wave.concentration()).max() <= wave.blowup_limit
+
+
+# ---------------------------------------------------------------- FHN flip-flop past the bound (SPEC §8)
+
+
+def flip_flags(values):
+    """Run flip_kernel over a sequence of one vertex's values c^0, c^1, ...: the flag after each step."""
+    import warp as wp
+
+    c = wp.array(values[:1], dtype=wp.float64, device="cpu")
+    previous = wp.clone(c)
+    increment, earlier = wp.zeros(1, dtype=wp.float64, device="cpu"), wp.zeros(1, dtype=wp.float64, device="cpu")
+    streak, flag = wp.zeros(1, dtype=wp.int32, device="cpu"), wp.zeros(1, dtype=wp.int32, device="cpu")
+    flags = []
+    for value in values[1:]:
+        c.fill_(value)
+        wp.launch(flip_kernel, dim=1, inputs=[c, wp.float64(FLIP_FLOOR), wp.float64(FLIP_HOLD), FLIP_STEPS],
+                  outputs=[previous, increment, earlier, streak, flag], device="cpu")  # fmt: skip
+        flags.append(int(flag.numpy()[0]))
+    return flags
+
+
+def test_flip_detector_counts_only_lasting_sign_flips_above_the_floor():
+    """c^n = 1 + a_n (-1)^n: a steady or growing flip-flop sets the flag when its increment has
+    flipped sign FLIP_STEPS times in a row (step FLIP_STEPS + 1); the alternation of a stable dt
+    (decaying by 0.9 per step), one below the floor (round-off) and a smooth rise never do."""
+    n = np.arange(4 * FLIP_STEPS)
+    steady = flip_flags(1 + 0.05 * (-1.0) ** n)
+    assert steady.index(FLIP_FLOP) == FLIP_STEPS and set(steady[FLIP_STEPS:]) == {FLIP_FLOP}
+    assert flip_flags(1 + 0.01 * (-1.01) ** n).index(FLIP_FLOP) == FLIP_STEPS
+    assert not any(flip_flags(1 + 0.05 * (-0.9) ** n))
+    assert not any(flip_flags(1 + 0.2 * FLIP_FLOOR * (-1.0) ** n))
+    assert not any(flip_flags(np.tanh(0.1 * n) + 1e-12 * (-1.0) ** n))
+
+
+def excited_fhn(op, ratio, scheme="explicit"):
+    """FHN at its kinetic fixed point c = 1 (ε = 0, so w stays 0; γ = 1) plus noise in [0, 1e-3],
+    dt = ratio × the bound, which is sharp there (f'(1) = ν - 1 = -L_f): the stability
+    benchmark's "excited" state."""
+    c0 = 1 + 1e-3 * np.random.default_rng(7).uniform(0.0, 1.0, op.n_vertices)
+    bound = FitzHughNagumo(op, 1.0, epsilon=0.0, c0=c0, scheme=scheme).stable_dt
+    return FitzHughNagumo(op, 1.0, epsilon=0.0, c0=c0, dt=ratio * bound, scheme=scheme, check_dt=False)
+
+
+def host_euler(op, c0, dt, steps, nu=-0.01):
+    """Explicit Euler of that FHN (γ = 1, w = 0) on the host: c += dt (f(c) - M⁻¹K c); every c^n."""
+    K, m = op.stiffness_matrix(), op.mass()
+    history = [c0]
+    for _ in range(steps):
+        c = history[-1]
+        history.append(c + dt * (c * (1 - c) * (c - nu) - (K @ c) / m))
+    return np.array(history)
+
+
+def test_fhn_flip_flop_past_the_bound_stops_with_an_oscillation_error():
+    """Explicit FHN at 1.01 × its bound does not blow up: the top mode grows until the cubic holds it
+    in a bounded period-2 flip-flop (host Euler here: 5000 steps, |c| < 2, no NaN, far inside
+    blowup_limit, so the runaway check alone never fires). The flip detector stops the stepper with
+    OscillationError, a BlowUpError, its state restored to the last good check of the same run."""
+    op = sphere_operator(1.0, 2)
+    wave = excited_fhn(op, 1.01)
+    history = host_euler(op, wave.concentration(), wave.dt, 5000)
+    assert np.all(np.isfinite(history)) and np.abs(history).max() < 2 and wave.blowup_limit > 1e5
+    increments = np.diff(history[-100:], axis=0)
+    flipping = np.all(increments[1:] * increments[:-1] < 0, axis=0)
+    assert flipping.any() and np.abs(increments[:, flipping]).min() > 0.1  # settled, sign flips every step
+    with pytest.raises(OscillationError, match=r"period-2 flip-flop between t = .* dt = .* stability bound .* dt=None") as error:
+        wave.advance(5000)
+    assert isinstance(error.value, BlowUpError) and error.value.steps == wave.steps and error.value.time == wave.time
+    assert wave.steps % wave.check_every == 0 and wave.steps < 5000
+    np.testing.assert_allclose(wave.concentration(), history[wave.steps], atol=1e-9)
+    np.testing.assert_array_equal(wave.inhibitor(), 0.0)
+
+
+def test_fhn_imex_flip_flop_past_its_reaction_bound_stops_too():
+    """IMEX past 2 / L_f: the uniform mode (untouched by implicit diffusion) flips at c = 1."""
+    wave = excited_fhn(sphere_operator(1.0, 2), 1.01, "imex")
+    with pytest.raises(OscillationError, match=r"imex Euler fell into a period-2 flip-flop .*\(dt < 2 / L_f\)"):
+        wave.advance(2000)
+    assert np.abs(wave.concentration() - 1).max() < 0.5
+
+
+@pytest.mark.parametrize("scheme", ["explicit", "imex"])
+def test_fhn_below_the_bound_runs_long_without_a_flip_flop(scheme):
+    """The same state at 0.9 × the bound: deviations alternate but decay, for 5000 steps."""
+    wave = excited_fhn(sphere_operator(1.0, 2), 0.9, scheme).advance(5000)
+    assert np.abs(wave.concentration() - 1).max() < 1e-9
+
+
+@pytest.mark.parametrize("scheme", ["explicit", "imex"])
+def test_fhn_pulses_at_the_default_dt_never_trip_the_flip_detector(scheme):
+    """SPEC parameters, float32, dt = None (0.9 × the bound), a narrow pulse (control values up to
+    1.2) on a level-2 sphere: 2000 steps, about 7 kinetic periods of pulses from the pacemaker."""
+    op = LaplaceBeltrami(icosphere(1.0, 2), device="cpu", dtype="float32")
+    c0, _ = gaussian_pulse(op, 0, 0.3, gamma=0.2)
+    wave = FitzHughNagumo(op, c0=c0, scheme=scheme)
+    peaks = [wave.advance(20).concentration().max() for _ in range(100)]
+    assert max(peaks) > 0.9 and min(peaks) < 0.1  # excited and recovered, not stopped
 
 
 # ---------------------------------------------------------------- FitzHugh–Nagumo pulse speed

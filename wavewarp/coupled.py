@@ -27,7 +27,7 @@ from .laplace import LaplaceBeltrami
 from .relax import relax
 from .device import run_steps
 from .shell import RelaxationError, Shell
-from .waves import BlowUpError, TimeStepError, _Stepper
+from .waves import TimeStepError, _Stepper
 
 ROUND_OFF_SLACK = 10.0
 
@@ -120,10 +120,10 @@ class Walking:
     5. `recorder()`, if given, launches device-only work (e.g. a trace row).
 
     `advance(steps)` runs chunks of up to `check_every` coupled steps with no host round-trip (one
-    CUDA graph per chunk size). After each chunk one flag is read (NaN/Inf or runaway values of c,
-    w, v: BlowUpError with the state restored to the chunk's start); sensitive runs then re-check
-    the wave's stability bound on the moved surface (TimeStepError, state restored, if the fixed dt
-    now exceeds it).
+    CUDA graph per chunk size). After each chunk the flags are read (NaN/Inf or runaway values of c,
+    w, v: BlowUpError; the wave's period-2 flip-flop: OscillationError; state restored to the
+    chunk's start); sensitive runs then re-check the wave's stability bound on the moved surface
+    (TimeStepError, state restored, if the fixed dt now exceeds it).
     """
 
     def __init__(self, dynamics, wave: _Stepper, *, sensitive: bool = True, check_every: int = 20, recorder=None):
@@ -185,14 +185,12 @@ class Walking:
             chunk = min(self.check_every, steps - done)
             for backup, a in zip(self._backups, self._state):
                 wp.copy(backup, a)
+            wave._flag.zero_()
             run_steps(self._step, chunk, device=self.shell.device, graphs=self._graphs, modules=modules,
                       capture=dynamics.capture and wave.capture)  # fmt: skip
-            wave._flag.zero_()
-            wave._check_chunk()
-            failure = dynamics.runaway(dynamics.time, chunk * wave.dt) if not wave._flag.numpy()[0] else BlowUpError(
-                f"{wave.scheme} coupled to the {dynamics.scheme} blew up between t = {wave.time:.6g} and "
-                f"t = {wave.time + chunk * wave.dt:.6g} (NaN/Inf or |c|, |w| past {wave.blowup_limit:.3g}); the state "
-                f"is restored to t = {wave.time:.6g}. Reduce dt", wave.time, wave.steps)  # fmt: skip
+            failure = wave._chunk_error(chunk, wave._check_chunk(), f" coupled to the {dynamics.scheme}")
+            if failure is None:
+                failure = dynamics.runaway(dynamics.time, chunk * wave.dt)
             if failure is None and self.sensitive:
                 self.operator.update(dynamics.x)  # a graph replay moved the surface without a new `version`
                 try:

@@ -37,14 +37,13 @@ from .kernels import shell as kernels_shell
 from .kernels.contact import friction_kernel, gravity_kernel, ground_contact_kernel, limit_transpose_kernel
 from .kernels.dynamics import (
     first_moment_kernel,
-    momentum_kernel,
     rigid_correction_kernel,
     rigid_sums_kernel,
     speed_runaway_kernel,
     symplectic_euler_kernel,
     trace_row_kernel,
 )
-from .kernels.limit_surface import limit_positions_kernel
+from .kernels.limit_surface import limit_motion_kernel
 from .kernels.reduce import REDUCTION_BLOCK
 from .laplace import LaplaceBeltrami
 from .shell import Shell
@@ -114,8 +113,7 @@ class ShellDynamics:
             self._mass = wp.array(self.mass.astype(self._real), dtype=self.scalar)
             self._inverse_mass = wp.array((1.0 / self.mass).astype(self._real), dtype=self.scalar)
             self._forces = wp.zeros(n, dtype=self.vec3)
-            self._momentum = wp.zeros(2, dtype=self.vec3)
-            self._rigid_sums = wp.zeros(3, dtype=self.vec3)
+            self._rigid_sums = wp.zeros(5, dtype=self.vec3)  # zeroed by their consumer, rigid_correction_kernel
             self._second_moment = wp.zeros(1, dtype=wp.types.matrix((3, 3), self.scalar))
             self._rigid = wp.zeros(5, dtype=self.vec3)
             self._first_moment = wp.zeros(1, dtype=self.vec3)
@@ -197,18 +195,13 @@ class ShellDynamics:
         return math.sqrt(max(float(eigenvalue), 1e-300))
 
     # ---------------------------------------------------------------- stepping
-    def _external_forces(self) -> None:
-        """Gravity on the control points; contact and friction on the limit points, through Lᵀ."""
-        n, s = len(self.mass), self.scalar
-        if self.gravity > 0:
-            wp.launch(gravity_kernel, dim=n, inputs=[self._mass, s(self.gravity)], outputs=[self._forces])
+    def _contact_forces(self) -> None:
+        """Contact and friction on the limit points, reaching the control points through Lᵀ."""
         if self.ground is None:
             return
-        m = self.mask
-        for values, limit in ((self.x, self._limit_x), (self.v, self._limit_v)):
-            wp.launch(limit_positions_kernel, dim=n, inputs=[values, m.ring_start, m.ring, m.centre_weight,
-                                                              m.ring_weight], outputs=[limit])  # fmt: skip
-        g = self.ground
+        m, n, s, g = self.mask, len(self.mass), self.scalar, self.ground
+        wp.launch(limit_motion_kernel, dim=n, inputs=[self.x, self.v, m.ring_start, m.ring, m.centre_weight, m.ring_weight],
+                  outputs=[self._limit_x, self._limit_v])  # fmt: skip
         wp.launch(ground_contact_kernel, dim=n, inputs=[self._limit_x, self._limit_v, s(g.stiffness), s(g.damping)],
                   outputs=[self._normal_force, self._limit_forces])  # fmt: skip
         if g.friction > 0:
@@ -218,22 +211,17 @@ class ShellDynamics:
                                                          m.ring_weight], outputs=[self._forces])  # fmt: skip
 
     def _step(self) -> None:
+        """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration)."""
         n, s = len(self.mass), self.scalar
         self.shell.forces_device(self.x, self._forces)
-        self._rigid_sums.zero_()
-        self._second_moment.zero_()
-        wp.launch(rigid_sums_kernel, dim=self._reduction_threads, inputs=[self._forces, self._mass, self.x],
+        wp.launch(rigid_sums_kernel, dim=self._reduction_threads,
+                  inputs=[self._forces, self._mass, self.x, self.v, int(self.damping > 0)],
                   outputs=[self._rigid_sums, self._second_moment], block_dim=REDUCTION_BLOCK)  # fmt: skip
-        if self.damping > 0:
-            self._momentum.zero_()
-            wp.launch(momentum_kernel, dim=self._reduction_threads, inputs=[self._mass, self.x, self.v],
-                      outputs=[self._momentum], block_dim=REDUCTION_BLOCK)  # fmt: skip
-        wp.launch(rigid_correction_kernel, dim=1,
-                  inputs=[self._rigid_sums, self._second_moment, self._momentum, s(1.0 / self.total_mass)],
+        wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment, s(1.0 / self.total_mass)],
                   outputs=[self._rigid])  # fmt: skip
-        self._external_forces()
+        self._contact_forces()
         wp.launch(symplectic_euler_kernel, dim=n,
-                  inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.dt)],
+                  inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.gravity), s(self.dt)],
                   outputs=[self.x, self.v])  # fmt: skip
 
     def _run(self, steps: int) -> None:
@@ -308,7 +296,10 @@ class ShellDynamics:
         """(V, 3) gravity, contact and friction forces on the control points at the current state."""
         with wp.ScopedDevice(self.device):
             self._forces.zero_()
-            self._external_forces()
+            if self.gravity > 0:
+                wp.launch(gravity_kernel, dim=len(self.mass), inputs=[self._mass, self.scalar(self.gravity)],
+                          outputs=[self._forces])  # fmt: skip
+            self._contact_forces()
         return self._forces.numpy().astype(np.float64)
 
     def normal_forces(self) -> np.ndarray:

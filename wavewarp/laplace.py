@@ -25,8 +25,9 @@ import math
 import numpy as np
 import warp as wp
 
-from .device import mat22, numpy_dtype
+from .device import mat22, numpy_dtype, run_steps
 from .geometry import LimitMask, SurfaceTables
+from .kernels import laplace as kernels_laplace
 from .kernels.laplace import (
     assemble_mass_kernel,
     assemble_stiffness_kernel,
@@ -96,7 +97,7 @@ class LaplaceBeltrami:
                 self._values = wp.zeros(len(columns), dtype=self.scalar)
                 self._mass_values = wp.zeros(len(columns), dtype=self.scalar)
                 self._mass_diagonal = wp.zeros(n, dtype=self.scalar)
-        self._eigenvectors = {}
+        self._power = {}  # per mass_corrections: the power iteration's vectors, sums and window graphs
         self.version = 0
         self._mass_version = None
         self.update(x)
@@ -362,34 +363,43 @@ class LaplaceBeltrami:
         With y = K u and z = W_p y, the estimate (y·z)/(u·y) is the Rayleigh quotient in the K inner
         product, in which W_p K is self-adjoint: it rises monotonically towards λ_max. Iteration
         stops when a window of `check_every` iterations changes it by less than `tol` (relative),
-        or after `max_iterations`, and returns the estimate. The vector is kept and warm-starts
-        the next call (after `update`, typically one window).
+        or after `max_iterations`, and returns the estimate. Each window is one captured graph (one
+        host read per window). The vector is kept and warm-starts the next call (after `update`,
+        typically two windows).
         """
         corrections = int(mass_corrections)
         if corrections < 0 or max_iterations < 1 or check_every < 1 or not tol > 0:
             raise ValueError("largest_eigenvalue needs mass_corrections >= 0, max_iterations >= 1, check_every >= 1, tol > 0")
         n = self.n_vertices
-        with wp.ScopedDevice(self.device):
-            if corrections not in self._eigenvectors:
+        if corrections not in self._power:
+            with wp.ScopedDevice(self.device):
                 start = np.random.default_rng(corrections).uniform(-1.0, 1.0, n)
-                self._eigenvectors[corrections] = wp.array(start.astype(self._real), dtype=self.scalar)
-            u = self._eigenvectors[corrections]
-            y, z = wp.empty(n, dtype=self.scalar), wp.empty(n, dtype=self.scalar)
-            sums = wp.zeros(3, dtype=self.scalar)  # y·z, u·y, z·z
-        previous = 0.0
-        for iteration in range(1, max_iterations + 1):
+                u = wp.array(start.astype(self._real), dtype=self.scalar)
+                y, z = wp.empty(n, dtype=self.scalar), wp.empty(n, dtype=self.scalar)
+                sums = wp.zeros(3, dtype=self.scalar)  # y·z, u·y, z·z
+            self._power[corrections] = (u, y, z, sums, {})
+        u, y, z, sums, graphs = self._power[corrections]
+        if corrections and self.assembled and self._mass_version != self.version:
+            self._assemble_mass()  # host logic stays out of the captured window
+
+        def iterate():
             self.apply_device(u, y)
             self.inverse_mass_device(y, z, corrections)
             self.dot_device(y, z, sums, 0)
             self.dot_device(u, y, sums, 1)
             self.dot_device(z, z, sums, 2)
             wp.launch(normalize_kernel, dim=n, inputs=[z, sums[2:3]], outputs=[u], device=self.device)
-            if iteration % check_every == 0 or iteration == max_iterations:
-                yz, uy, _ = sums.numpy().astype(np.float64)
-                estimate = yz / uy
-                if not math.isfinite(estimate) or estimate <= 0:
-                    raise RuntimeError(f"largest_eigenvalue: power iteration broke down (estimate {estimate})")
-                if estimate - previous <= tol * estimate:
-                    break
-                previous = estimate
+
+        previous, iteration = 0.0, 0
+        while iteration < max_iterations:
+            window = min(check_every, max_iterations - iteration)
+            run_steps(iterate, window, device=self.device, graphs=graphs, modules=(kernels_laplace,), capture=True)
+            iteration += window
+            yz, uy, _ = sums.numpy().astype(np.float64)
+            estimate = yz / uy
+            if not math.isfinite(estimate) or estimate <= 0:
+                raise RuntimeError(f"largest_eigenvalue: power iteration broke down (estimate {estimate})")
+            if estimate - previous <= tol * estimate:
+                break
+            previous = estimate
         return estimate

@@ -12,10 +12,12 @@ import os
 from functools import cached_property
 
 import numpy as np
+import scipy.sparse
+import scipy.sparse.csgraph
 
 from .checks import positive
 from .subdivision import limit_weight, loop_subdivide
-from .topology import Topology
+from .topology import Topology, unique_keys
 
 
 class Mesh:
@@ -121,8 +123,12 @@ class Mesh:
 
 
 def _undirected_edges(triangles: np.ndarray) -> np.ndarray:
-    pairs = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    return np.unique(np.sort(pairs, axis=1), axis=0)
+    """Sorted (lo, hi) vertex pairs of the edges, each once (integer keys: far faster than
+    np.unique over rows)."""
+    tails, heads = triangles.reshape(-1), np.roll(triangles, -1, axis=1).reshape(-1)
+    n = int(triangles.max()) + 1
+    keys = unique_keys(np.minimum(tails, heads) * n + np.maximum(tails, heads))
+    return np.stack([keys // n, keys % n], axis=1)
 
 
 def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
@@ -162,13 +168,13 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
             "corners are collinear (zero area); remove it or move its vertices apart"
         )
     sorted_tri = np.sort(triangles, axis=1)
-    _, first, counts = np.unique(sorted_tri, axis=0, return_index=True, return_counts=True)
-    if np.any(counts > 1):
-        dup_key = sorted_tri[first[np.flatnonzero(counts > 1)[0]]]
-        same = np.flatnonzero(np.all(sorted_tri == dup_key, axis=1))
+    order = np.lexsort(sorted_tri.T[::-1])
+    repeats = np.flatnonzero(np.all(sorted_tri[order[1:]] == sorted_tri[order[:-1]], axis=1))
+    if len(repeats):
+        same = np.sort(order[repeats[0] : repeats[0] + 2])
         raise ValueError(
             f"triangles {int(same[0])} and {int(same[1])} are duplicates (both use vertices "
-            f"{tuple(int(i) for i in dup_key)}): remove one of them"
+            f"{tuple(int(i) for i in sorted_tri[same[0]])}): remove one of them"
         )
     used = np.zeros(n_vertices, dtype=bool)
     used[triangles.reshape(-1)] = True
@@ -248,19 +254,9 @@ def _fan_sizes(topology: Topology, n_vertices: int) -> np.ndarray:
 
 
 def _components(n_vertices: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Connected-component label of each vertex (label propagation to the smallest index)."""
-    label = np.arange(n_vertices)
-    while True:
-        low = np.minimum(label[a], label[b])
-        updated = label.copy()
-        np.minimum.at(updated, a, low)
-        np.minimum.at(updated, b, low)
-        updated = updated[updated]  # pointer jumping
-        if np.array_equal(updated, label):
-            break
-        label = updated
-    _, dense = np.unique(label, return_inverse=True)
-    return dense
+    """Connected-component label of each vertex, from the edges (a, b)."""
+    graph = scipy.sparse.coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_vertices, n_vertices))
+    return scipy.sparse.csgraph.connected_components(graph, directed=False)[1]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -314,11 +310,11 @@ def control_points_for_limit(mesh: Mesh, targets, tol: float = 1e-14, max_iter: 
     """
     targets = np.asarray(targets, dtype=np.float64)
     rows, cols, vals = mesh.limit_mask_matrix()
+    limit = scipy.sparse.csr_matrix((vals, (rows, cols)), shape=(len(targets), len(targets)))
     scale = np.max(np.abs(targets))
     x = targets.copy()
     for _ in range(max_iter):
-        lx = np.stack([np.bincount(rows, vals * x[cols, k], len(x)) for k in range(3)], axis=1)
-        residual = targets - lx
+        residual = targets - limit @ x
         x += residual
         if np.max(np.abs(residual)) <= tol * scale:
             return x

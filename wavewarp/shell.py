@@ -19,10 +19,12 @@ import numpy as np
 import warp as wp
 
 from .checks import finite, positive
-from .device import block_sum, mat22, numpy_dtype
+from .device import block_sum, mat22, numpy_dtype, reduction_threads
 from .geometry import SurfaceTables, checked_positions, evaluate
+from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.shell import (
     MAX_PATCH,
+    VolumeMoments,
     active_reference_kernel,
     gather_forces_kernel,
     koiter_energy_kernel,
@@ -107,12 +109,9 @@ class Shell:
             self.ref_curvature = wp.empty(n_q, dtype=m22)
             self.ref_weight = wp.empty(n_q, dtype=self.scalar, requires_grad=False)
             self._energy = wp.zeros(1, dtype=wp.float64, requires_grad=True)
-            self._volume = wp.zeros(1, dtype=wp.float64, requires_grad=True)
-            self._x_sum = wp.zeros(1, dtype=self.vec3, requires_grad=True)
-            self._normal_sum = wp.zeros(1, dtype=wp.vec3d, requires_grad=True)
+            self._moments = wp.zeros(1, dtype=VolumeMoments, requires_grad=True)
             self._energy_density = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
-            self._volume_terms = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
-            self._normal_terms = wp.zeros(n_q, dtype=wp.vec3d, requires_grad=True)
+            self._moment_terms = wp.zeros(max(n_q, mesh.n_vertices), dtype=VolumeMoments, requires_grad=True)
             self._c = wp.zeros(mesh.n_vertices, dtype=self.scalar)
             self._x = wp.zeros(mesh.n_vertices, dtype=self.vec3, requires_grad=True)
             self._forces = wp.zeros(mesh.n_vertices, dtype=self.vec3)
@@ -148,7 +147,8 @@ class Shell:
 
     def _volume_of(self, x: wp.array) -> float:
         self._launch_volume(x, differentiable=False)
-        return float(self._volume.numpy()[0])
+        moments = self._moments.numpy()[0]
+        return float(moments[3] - moments[4:7] @ moments[:3] / self.mesh.n_vertices)
 
     def _sum(self, values: wp.array, total: wp.array, differentiable: bool) -> None:
         """total[0] = Σ values: a block reduction (its blocks add atomically, in any order), Warp's
@@ -163,17 +163,18 @@ class Shell:
             block_sum(values, total)
 
     def _launch_volume(self, x: wp.array, differentiable: bool) -> None:
-        """V about the control centroid, and S = ⅓ ∫ n dω, into self._volume, self._normal_sum."""
+        """The volume moments [S, V₀, Σx] (kernels/shell.py `volume_kernel`) into self._moments:
+        per-item terms and a fixed-order or differentiable sum, or one block-reducing pass."""
         t = self.tables
-        self._sum(x, self._x_sum, differentiable)
-        wp.launch(
-            volume_kernel, dim=t.n_quadrature_points,
-            inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
-                    self._x_sum],
-            outputs=[self._volume_terms, self._normal_terms], device=self.device,
-        )  # fmt: skip
-        self._sum(self._volume_terms, self._volume, differentiable)
-        self._sum(self._normal_terms, self._normal_sum, differentiable)
+        patch = [x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle]
+        if differentiable or self.deterministic:
+            wp.launch(volume_kernel, dim=len(self._moment_terms), inputs=patch + [0],
+                      outputs=[self._moment_terms, self._moments], device=self.device)  # fmt: skip
+            self._sum(self._moment_terms, self._moments, differentiable)
+            return
+        self._moments.zero_()
+        wp.launch(volume_kernel, dim=reduction_threads(len(self._moment_terms)), inputs=patch + [1],
+                  outputs=[self._moment_terms, self._moments], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
 
     def _elastic_inputs(self, x: wp.array) -> list:
         t = self.tables
@@ -189,7 +190,8 @@ class Shell:
         if self.volume_penalty > 0:
             self._launch_volume(x, differentiable=True)
             wp.launch(volume_energy_kernel, dim=1,
-                      inputs=[self._volume, wp.float64(self.rest_volume), wp.float64(self.volume_penalty)],
+                      inputs=[self._moments, self.mesh.n_vertices, wp.float64(self.rest_volume),
+                              wp.float64(self.volume_penalty)],
                       outputs=[energy], device=self.device)  # fmt: skip
 
     def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array | None = None) -> None:
@@ -202,28 +204,27 @@ class Shell:
             return
         t = self.tables
         target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
+        volume = [self._moments, target, penalty]
         if self.volume_penalty > 0:
-            self._launch_volume(x, differentiable=False)  # V for the pressure, S for the centroid term
-        if not self.deterministic:
+            self._launch_volume(x, differentiable=False)  # V for the pressure, S and x̄ for the centroid term
+            if not self.deterministic:  # the atomic scatter adds onto the centroid term
+                wp.launch(volume_centroid_forces_kernel, dim=len(forces), inputs=volume, outputs=[forces],
+                          device=self.device)  # fmt: skip
+        elif not self.deterministic:
             forces.zero_()  # the atomic scatter adds; the deterministic gather writes
         wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles,
-                  inputs=self._elastic_inputs(x) + [t.weights, self._x_sum, self._volume, target, penalty,
-                                                    int(self.deterministic)],
+                  inputs=self._elastic_inputs(x) + [t.weights, *volume, int(self.deterministic), int(energy is not None)],
                   outputs=[self._energy_density, forces, self._jets], device=self.device)  # fmt: skip
         if self.deterministic:
             wp.launch(gather_forces_kernel, dim=self.mesh.n_vertices,
                       inputs=[self._jets, self._vertex_entry_start, self._vertex_entries, self._entry_triangle,
-                              t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
+                              t.patch_start, t.triangle_type, t.basis, t.points_per_triangle, *volume],
                       outputs=[forces], device=self.device)  # fmt: skip
-        if self.volume_penalty > 0:
-            wp.launch(volume_centroid_forces_kernel, dim=len(forces),
-                      inputs=[self._volume, self._normal_sum, target, penalty], outputs=[forces],
-                      device=self.device)  # fmt: skip
         if energy is not None:
             self._sum(self._energy_density, energy, differentiable=False)
             if self.volume_penalty > 0:
-                wp.launch(volume_energy_kernel, dim=1, inputs=[self._volume, target, penalty], outputs=[energy],
-                          device=self.device)  # fmt: skip
+                wp.launch(volume_energy_kernel, dim=1, inputs=[self._moments, self.mesh.n_vertices, target, penalty],
+                          outputs=[energy], device=self.device)  # fmt: skip
 
     def _autodiff_forces(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
         xg = wp.clone(x, requires_grad=True)

@@ -113,7 +113,9 @@ class WalkerRun(WaveClock):
         settled = self.dynamics.positions()
         self.rest_height = float(self.dynamics.mass @ mesh.vertices[:, 2] / self.dynamics.total_mass)  # rigid, in contact
         self.contact_depth = depth
-        self.operator = LaplaceBeltrami(mesh, settled if p["sensitive"] else None, rule=rule, device=device, dtype=dtype)
+        # a moving surface is re-read every chemistry step: matrix-free K c (assembly costs ~60 K c's, BENCHMARKS.md "Speed")
+        self.operator = LaplaceBeltrami(mesh, settled if p["sensitive"] else None, rule=rule, assembled=not p["sensitive"],
+                                        device=device, dtype=dtype)  # fmt: skip
         width = p["width"] or 1.5 * mean_edge(mesh)
         c0, _ = gaussian_pulse(self.operator, self.origin_vertex, width / radius, gamma=p["gamma"], radius=radius)
         self.wave = FitzHughNagumo(self.operator, p["gamma"], p["nu"], p["kappa"], p["epsilon"], c0=c0, dt=p["dt"])

@@ -4,7 +4,11 @@ A stepper advances control values on the device with no host round-trip inside a
 step is a fixed sequence of kernel launches (captured once as a graph, CUDA or Warp's CPU
 graphs, and replayed), the implicit solves loop on the device (`wp.capture_while`). Every
 `check_every` steps one flag is read back: NaN/Inf or a value past `blowup_limit` restores
-the last good state and raises `BlowUpError` (no NaN is ever left in the state).
+the last good state and raises `BlowUpError` (no NaN is ever left in the state). FHN past its
+bound can instead settle into a bounded period-2 flip-flop: a per-vertex detector inside each step
+(`flip_kernel`: c^{n+1} - c^n alternating in sign, above a floor and not decaying, FLIP_STEPS steps
+in a row) sets the same flag to FLIP_FLOP, and the check raises `OscillationError` (a
+BlowUpError), state restored likewise (SPEC §8).
 
 Stability guard: λ_max(M̃⁻¹K) comes from power iteration on the device
 (`LaplaceBeltrami.largest_eigenvalue`); a `dt` past the method's bound is refused with a
@@ -30,6 +34,7 @@ from .kernels import laplace as kernels_laplace
 from .kernels import waves as kernels_waves
 from .kernels.laplace import weighted_dot_kernel
 from .kernels.waves import (
+    FLIP_FLOP,
     cg_condition_kernel,
     cg_direction_kernel,
     cg_failed_kernel,
@@ -39,6 +44,7 @@ from .kernels.waves import (
     fhn_explicit_kernel,
     fhn_imex_rhs_kernel,
     fhn_inhibitor_kernel,
+    flip_kernel,
     inverse_diagonal_kernel,
     runaway_kernel,
     shifted_operator_kernel,
@@ -47,6 +53,14 @@ from .kernels.waves import (
 from .laplace import DOT_STRIDE, LaplaceBeltrami
 
 FHN_SCHEMES = ("explicit", "imex")
+# FHN flip detector (SPEC §8; docs/chemistry.md): a vertex stops the run after FLIP_STEPS steps in a
+# row whose increment d = c^{n+1} - c^n flips sign, exceeds FLIP_FLOOR × max(1, |c0|, |w0|) (float32
+# round-off and the CG tolerance stay below it) and keeps |d| >= FLIP_HOLD |d^{n-1}| (same phase, two
+# steps back: the alternation of a stable dt decays by its factor squared, < FLIP_HOLD below 0.9995
+# of the bound).
+FLIP_STEPS = 8
+FLIP_FLOOR = 1e-3
+FLIP_HOLD = 0.999
 
 
 class BlowUpError(RuntimeError):
@@ -56,6 +70,10 @@ class BlowUpError(RuntimeError):
         super().__init__(message)
         self.time = time
         self.steps = steps
+
+
+class OscillationError(BlowUpError):
+    """FHN settled into a bounded period-2 flip-flop (a dt past the stability bound that does not blow up)."""
 
 
 class TimeStepError(ValueError):
@@ -166,11 +184,40 @@ class _Stepper(ABC):
                       outputs=[self._flag], device=self.device)  # fmt: skip
         return None
 
+    def _chunk_error(self, steps: int, cause: str | None, coupled: str = "") -> BlowUpError | None:
+        """Read the flag of a chunk of `steps` steps (after `_check_chunk`, whose message is `cause`):
+        None when clear, else the error to raise once the caller has restored the state (FLIP_FLOP
+        comes from FitzHughNagumo's flip detector only). `coupled` names a coupling in the message."""
+        code = self._flag.numpy()[0]
+        if not code:
+            return None
+        window = f"between t = {self.time:.6g} and t = {self.time + steps * self.dt:.6g}"
+        restored = f"the state is restored to t = {self.time:.6g}"
+        if code == FLIP_FLOP:
+            return OscillationError(
+                f"{self.scheme}{coupled} fell into a period-2 flip-flop {window}: c^(n+1) - c^n changed sign "
+                f"every step for {FLIP_STEPS} steps at some vertex, above {self.flip_floor:.3g} and not decaying. "
+                f"This bounded oscillation (no NaN, no runaway value) is the instability of a time step too large "
+                f"for the state: dt = {self.dt:.6g} against the stability bound {self._stable_dt:.6g} "
+                f"({self.bound_formula}); {restored}. Reduce dt, e.g. to {self.safety * self._stable_dt:.6g}, "
+                "or use dt=None",
+                self.time,
+                self.steps,
+            )
+        return BlowUpError(
+            f"{self.scheme}{coupled} blew up {window} ({cause or 'NaN/Inf or a runaway value'}; |value| limit "
+            f"{self.blowup_limit:.3g}) with dt = {self.dt:.6g} (stability bound {self._stable_dt:.6g}); {restored}. "
+            "Reduce dt or check the initial data",
+            self.time,
+            self.steps,
+        )
+
     def advance(self, steps: int = 1):
         """Advance `steps` time steps on the device; returns self.
 
         Raises BlowUpError (state restored to the last good check) on NaN/Inf or values past
-        `blowup_limit`, and ValueError when the surface moved and a fixed dt now exceeds the bound.
+        `blowup_limit`, its OscillationError on FHN's period-2 flip-flop, and ValueError when the
+        surface moved and a fixed dt now exceeds the bound.
         """
         steps = count("steps", steps, 0)
         self._refresh()
@@ -182,21 +229,13 @@ class _Stepper(ABC):
             chunk = min(self.check_every, steps - done)
             for backup, a in zip(backups, self._state()):
                 wp.copy(backup, a)
-            self._run(chunk)
             self._flag.zero_()
-            failure = self._check_chunk()
-            if self._flag.numpy()[0]:
+            self._run(chunk)
+            error = self._chunk_error(chunk, self._check_chunk())
+            if error is not None:
                 for backup, a in zip(backups, self._state()):
                     wp.copy(a, backup)
-                failure = failure or "NaN/Inf or a runaway value"
-                raise BlowUpError(
-                    f"{self.scheme} blew up between t = {self.time:.6g} and t = {self.time + chunk * self.dt:.6g} "
-                    f"({failure}; |value| limit {self.blowup_limit:.3g}) with dt = {self.dt:.6g} "
-                    f"(stability bound {self._stable_dt:.6g}); the state is restored to t = {self.time:.6g}. "
-                    "Reduce dt or check the initial data",
-                    self.time,
-                    self.steps,
-                )
+                raise error
             done += chunk
             self.steps += chunk
             self.time += chunk * self.dt
@@ -232,6 +271,8 @@ class Telegraph(_Stepper):
 
     stable while dt < 2 / (γ sqrt(λ_max(M̃⁻¹K))) for every α ≥ 0. `c0`, `v0` (V,) are control
     values (see `gaussian_pulse`, `steady_front`); v^{½} = v0 + dt/2 (c_tt at t = 0).
+    No flip detector: the scheme is linear, so past the bound the top mode grows without limit
+    (the runaway check stops it), and below it modes near ω dt = π alternate sign legitimately.
     """
 
     scheme = "telegraph leapfrog"
@@ -316,6 +357,8 @@ class FitzHughNagumo(_Stepper):
     M (c^n + dt (f(c^n) - w^n)) by Jacobi-preconditioned CG on the device (relative tolerance
     `tol`), then w^{n+1} = (w^n + dt ε c^{n+1}) / (1 + dt ε κ): no diffusive limit, stable while
     dt < 2 / L_f (lumped mass only). Defaults are the SPEC's ν, κ, ε, γ; `w0` defaults to 0.
+    Past the bound the cubic can hold the unstable mode in a bounded period-2 flip-flop instead of
+    a blow-up: `flip_kernel` after each step catches it (OscillationError, module docstring).
     """
 
     def __init__(self, operator, gamma=0.2, nu=-0.01, kappa=1e-4, epsilon=0.005, *, c0, w0=None, dt=None,
@@ -340,10 +383,14 @@ class FitzHughNagumo(_Stepper):
         self.reaction_lipschitz = fhn_reaction_lipschitz(self.nu)
         c0 = self._initial(c0, "c0")
         w0 = np.zeros_like(c0) if w0 is None else self._initial(w0, "w0")
+        scale = max(1.0, np.max(np.abs(c0)), np.max(np.abs(w0)))
         if self._blowup_limit is None:
-            self._blowup_limit = 1e6 * max(1.0, np.max(np.abs(c0)), np.max(np.abs(w0)))
+            self._blowup_limit = 1e6 * scale
         self.blowup_limit = self._blowup_limit
+        self.flip_floor = FLIP_FLOOR * scale
         self.c, self.w = self._device_array(c0), self._device_array(w0)
+        self._previous, self._increment, self._earlier = wp.clone(self.c), wp.zeros_like(self.c), wp.zeros_like(self.c)
+        self._streak = wp.zeros(len(c0), dtype=wp.int32, device=self.device)
         if self.implicit:
             if tol is None:
                 tol = 1e-5 if self.scalar == wp.float32 else 1e-10
@@ -369,11 +416,14 @@ class FitzHughNagumo(_Stepper):
             self._solver.solve(self._rhs, self.c)
             wp.launch(fhn_inhibitor_kernel, dim=len(self.c), inputs=[self.c, s(self.epsilon), s(self.kappa), s(self.dt)],
                       outputs=[self.w], device=self.device)  # fmt: skip
-            return
-        self._diffusion_acceleration(self.c)
-        wp.launch(fhn_explicit_kernel, dim=len(self.c),
-                  inputs=[self._acceleration, s(self.gamma**2), s(self.nu), s(self.kappa), s(self.epsilon), s(self.dt)],
-                  outputs=[self.c, self.w], device=self.device)  # fmt: skip
+        else:
+            self._diffusion_acceleration(self.c)
+            wp.launch(fhn_explicit_kernel, dim=len(self.c),
+                      inputs=[self._acceleration, s(self.gamma**2), s(self.nu), s(self.kappa), s(self.epsilon), s(self.dt)],
+                      outputs=[self.c, self.w], device=self.device)  # fmt: skip
+        wp.launch(flip_kernel, dim=len(self.c), inputs=[self.c, s(self.flip_floor), s(FLIP_HOLD), FLIP_STEPS],
+                  outputs=[self._previous, self._increment, self._earlier, self._streak, self._flag],
+                  device=self.device)  # fmt: skip
 
     def _run(self, steps: int) -> None:
         if self.implicit:
@@ -389,7 +439,7 @@ class FitzHughNagumo(_Stepper):
         return None
 
     def _state(self) -> list:
-        return [self.c, self.w]
+        return [self.c, self.w, self._previous, self._increment, self._earlier, self._streak]
 
     def _watched(self) -> list:
         return [self.c, self.w]
