@@ -111,9 +111,9 @@ TOLERANCES = {
                  "√(γ²λ), 5%"),
     "front": (2e-1, "the walkers move with the travelling contraction (SPEC §6, Fig. 3a), so the FHN front must "
               "travel: coarse lattices pin it (error 1); its speed v sets the contraction's wavelength vT, here "
-              "to 20%, what an affordable lumped level meets: 10% is missed at level 6 (11%) and met only with "
-              "mass corrections, which the walkers' FHN does not use; the walker's dt = 0.5 alone slows the "
-              "front by 5%"),
+              "to 20%, what level 4 with two mass corrections or lumped level 5 meets: 10% needs level 5 with "
+              "two corrections (lumped: level 7), 4× the mechanics; the walker's dt = 0.5 alone slows the front "
+              "by 5%"),
 }  # fmt: skip
 BOX_SPHERE = ("a sphere with the box's h/R (R: L/2 for the wave guides, the walker's own), at the icosphere "
               "level whose mean control edge in R the box's matches (equivalent_level)")
@@ -609,16 +609,14 @@ def scene_setting(scene) -> dict:
     else:  # a box: its (even) divisions, and the icosphere level it resolves as well, for the sphere proxies
         divisions = p["divisions"] + p["divisions"] % 2
         setting.update(divisions=divisions, level=box_level(scene, divisions))
-    if walker:  # explicit FHN on the lumped mass (wavewarp/walker.py)
-        setting.update(mass_corrections=0, tol_factor=1.0)
+    if walker:  # explicit FHN (wavewarp/walker.py); the dynamics never relaxes: the default tolerance's radius
+        setting.update(mass_corrections=p["mass_corrections"], tol_factor=1.0)
     else:
         setting.update(mass_corrections=p["mass_corrections"], dt_fraction=SCENE_DT if p["dt"] == 0 else None,
                        tol_factor=1.0 if p["relax_tol"] == 0 else None)  # fmt: skip
     # The relax tolerance stays the dtype's default: the uniform-c radius does not see a quasi-static path's
     # sensitivity to it (ascidian, level 4, p = 2, t = 10: × 10 ends 0.46 R off float64, × 1 within 2e-3 R).
     fixed = {"discretization", "tol_factor"} | ({"rule"} if "rule" not in p else set())
-    if walker:  # FHN without mass corrections; the dynamics never relaxes: its radius is the default tolerance's
-        fixed |= {"mass_corrections"}
     return {"setting": setting, "fixed": sorted(fixed)}
 
 

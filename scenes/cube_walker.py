@@ -18,9 +18,9 @@ PARAMETERS = walker_parameters(
     AI=Param(0.0, "curvature coupling (SPEC §6)"),
     mu_v=Param(6.4, "volume penalty μV in units of Y h / L⁴ (ours: 0.4 Y h / R⁴ with R = L/2, as the other walkers)",
                minimum=0.0),  # fmt: skip
-    # SPEC §6; BENCHMARKS.md "Accuracy": the level-5 FHN front at 0.115 (17% slow); 32 divisions (level 4) pin it
-    divisions=Param(62, "control squares per face edge (even): 46,128 triangles, mean control edge 0.037 R, the "
-                    "sphere walker's level 5 resolution (benchmarks/accuracy.py equivalent_level)", minimum=2),
+    # SPEC §6; BENCHMARKS.md "Accuracy": the level-4 FHN front with two mass corrections, 10.5% slow
+    divisions=Param(32, "control squares per face edge (even): 12,288 triangles, mean control edge 0.071 R, the "
+                    "sphere walker's level 4 resolution (benchmarks/accuracy.py equivalent_level)", minimum=2),
     rule=Param("3", "quadrature: the 3-point rule (as the prism walker)"),
     origin=Param("edge", "where the first pulse starts", choices=tuple(ORIGINS)),
 )

@@ -19,9 +19,9 @@ PARAMETERS = walker_parameters(
     AC=Param(0.2, "metric coupling (SPEC §6)"),
     AI=Param(0.0, "curvature coupling (SPEC §6)"),
     mu_v=Param(11.1, "volume penalty μV in units of Y h / L⁴ (SPEC §6)", minimum=0.0),
-    # SPEC §6; BENCHMARKS.md "Accuracy": the level-5 FHN front at 0.115 (17% slow); 34 divisions (level 4) pin it
-    divisions=Param(68, "control squares per edge (even): 36,992 triangles, mean control edge 0.037 R, the sphere "
-                    "walker's level 5 resolution (benchmarks/accuracy.py equivalent_level)", minimum=2),
+    # SPEC §6; BENCHMARKS.md "Accuracy": the level-4 FHN front with two mass corrections, 10.5% slow
+    divisions=Param(34, "control squares per edge (even): 9,248 triangles, mean control edge 0.075 R, the sphere "
+                    "walker's level 4 resolution (benchmarks/accuracy.py equivalent_level)", minimum=2),
     rule=Param("3", "quadrature: the 3-point rule (the wave guides' '3x4' resolves the rounded edges' "
                "curvature better at 4× the cost; docs/walkers.md)"),  # fmt: skip
     origin=Param("vertex", "where the first pulse starts", choices=tuple(ORIGINS)),

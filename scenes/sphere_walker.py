@@ -11,8 +11,8 @@ PARAMETERS = walker_parameters(
     AC=Param(0.1, "metric coupling (SPEC §6)"),
     AI=Param(0.0, "curvature coupling (SPEC §6)"),
     mu_v=Param(0.4, "volume penalty μV in units of Y h / R⁴ (SPEC §6)", minimum=0.0),
-    # SPEC §6; BENCHMARKS.md "Accuracy": level 5 runs the FHN front at 0.115 (17% slow); levels 3 and 4 pin it
-    level=Param(5, "icosphere level: 20,480 triangles, mean control edge 0.038 R", minimum=1),
+    # SPEC §6; BENCHMARKS.md "Accuracy": with two mass corrections level 4 runs the FHN front 10.5% slow (lumped: pinned)
+    level=Param(4, "icosphere level: 5,120 triangles, mean control edge 0.075 R", minimum=1),
 )
 QUICK = {"level": 2, "periods": 2.2, "frames": 4}  # --quick: coarser smoke test, level 2 (320 triangles; its front pins)
 

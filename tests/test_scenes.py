@@ -352,9 +352,9 @@ DEPARTURES = {  # scene: {axis: (recommended, the scene's)} where the scene's ph
 def declared(scene) -> dict:
     """A scene's defaults on the accuracy benchmark's axes, read from its parameters."""
     p = resolve(load_scene(scene).PARAMETERS)
-    walker = "periods" in p  # explicit FHN on the lumped mass, no relaxation
+    walker = "periods" in p  # explicit FHN, no relaxation
     out = {"rule": p.get("rule", "3"), "discretization": "subdivision", "dtype": p["dtype"],  # no rule: "3"
-           "mass_corrections": 0 if walker else p["mass_corrections"],
+           "mass_corrections": p["mass_corrections"],
            "tol_factor": 1.0 if walker or p["relax_tol"] == 0 else None}  # fmt: skip
     out.update({"level": p["level"]} if "level" in p else {"divisions": p["divisions"]})
     if not walker:

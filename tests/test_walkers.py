@@ -55,7 +55,9 @@ def test_sphere_walker_quick_run_writes_the_walker_outputs(tmp_path, capsys):
     assert code == 0, err
     result = json.loads(stdout)
     assert result["period"] == pytest.approx(kinetic_period_by_euler(), rel=0.01)
-    assert result["speed_R_per_T"] is not None and abs(result["lateral_R"]) < 1e-3 * abs(result["distance_R"])
+    # float32 round-off breaks the y-mirror symmetry and rolling amplifies it (docs/walkers.md: 0.08 R over
+    # 6 periods); measured 1.9e-3 of the distance here. The symmetry itself: float64, to 1e-8, below.
+    assert result["speed_R_per_T"] is not None and abs(result["lateral_R"]) < 1e-2 * abs(result["distance_R"])
     assert 0.005 < result["sag_R"] < 0.05  # a few % of R (docs/walkers.md)
     assert any(path.endswith("_locomotion.png") for path in result["outputs"])
     stage = Usd.Stage.Open(str(out))
