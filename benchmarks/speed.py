@@ -276,7 +276,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None)
     parser.add_argument("--levels", type=int, nargs="+", default=[3, 4, 5, 6, 7, 8], help="icosphere levels (kernels)")
-    parser.add_argument("--step-levels", type=int, nargs="+", default=[3, 4, 5, 6], help="levels of the walker steps")
+    parser.add_argument("--step-levels", type=int, nargs="+", default=[3, 4, 5],
+                        help="levels of the walker steps (level 6 at the scene's dt_c: 1,386 substeps, slow to capture)")
     parser.add_argument("--numpy-max-level", type=int, default=6, help="skip the NumPy baseline above this level")
     parser.add_argument("--gather-max-level", type=int, default=7, help="skip the deterministic gather above this level")
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
