@@ -49,7 +49,6 @@ import functools
 import json
 import math
 import os
-import platform
 import sys
 import time
 from datetime import date
@@ -61,7 +60,7 @@ import warp as wp
 from numpy.polynomial import legendre
 from scipy.optimize import brentq
 
-from wavewarp.device import resolve_device
+from wavewarp.device import describe_device, device_tag, resolve_device
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import cube, icosphere, prism
@@ -806,12 +805,10 @@ def main(argv=None) -> int:
     wp.config.log_level = wp.LOG_WARNING
     device = resolve_device(args.device)
     os.makedirs(args.out, exist_ok=True)
-    tag = device.alias.replace(":", "")
+    tag = device_tag(device)
     json_path = os.path.join(args.out, f"accuracy_{tag}.json")
     began = time.perf_counter()
-    result = {"benchmark": "accuracy", "date": date.today().isoformat(), "device": device.alias, "device_name": device.name,
-              "host": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(), "warp": wp.config.version,
-              "quick": args.quick, "tolerances": {case: {"tolerance": t, "why": why} for case, (t, why) in TOLERANCES.items()},
+    result = {"benchmark": "accuracy", "date": date.today().isoformat(), **describe_device(device), "quick": args.quick, "tolerances": {case: {"tolerance": t, "why": why} for case, (t, why) in TOLERANCES.items()},
               "cases": {}}  # fmt: skip
     plan = sweeps(args.quick)
     for case in args.cases:

@@ -24,7 +24,6 @@ import argparse
 import functools
 import json
 import os
-import platform
 import sys
 import time
 import warnings
@@ -35,6 +34,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import warp as wp
 
+from wavewarp.device import describe_device, device_tag
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
@@ -196,7 +196,7 @@ def chart(result, path) -> None:
 
 def save_json(args, device, result) -> str:
     """Write the result (also after every throughput row, so an interrupted run keeps its rows)."""
-    name = f"chemistry_{device.alias.replace(':', '')}{'_quick' if args.quick else ''}"
+    name = f"chemistry_{device_tag(device)}{'_quick' if args.quick else ''}"
     path = os.path.join(args.out, name + ".json")
     write_json(path, result)
     return path
@@ -257,11 +257,7 @@ def main(argv=None) -> int:
     result = {
         "benchmark": "chemistry",
         "date": date.today().isoformat(),
-        "device": device.alias,
-        "device_name": device.name,
-        "host": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "warp": wp.config.version,
+        **describe_device(device),
         "throughput": rows,
         "spectrum": spectra,
         "spectrum_source": args.spectrum_from or "this run",

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -21,6 +20,7 @@ from datetime import date
 import numpy as np
 import warp as wp
 
+from wavewarp.device import describe_device, device_tag
 from wavewarp.geometry import SurfaceTables, evaluate
 from wavewarp.mesh import icosphere
 
@@ -97,16 +97,12 @@ def main(argv=None) -> int:
     result = {
         "benchmark": "limit_surface",
         "date": date.today().isoformat(),
-        "device": device.alias,
-        "device_name": device.name,
-        "host": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "warp": wp.config.version,
+        **describe_device(device),
         "cold_compile_seconds": compile_s,
         "rows": rows,
     }
     os.makedirs(args.out, exist_ok=True)
-    path = os.path.join(args.out, f"limit_surface_{device.alias.replace(':', '')}.json")
+    path = os.path.join(args.out, f"limit_surface_{device_tag(device)}.json")
     from wavewarp.io import write_json
 
     write_json(path, result)

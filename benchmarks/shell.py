@@ -24,6 +24,7 @@ import warp as wp
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from numpy_shell import NumpyShell  # noqa: E402
 
+from wavewarp.device import describe_device, device_tag  # noqa: E402
 from wavewarp.io import write_json  # noqa: E402
 from wavewarp.mesh import icosphere  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
@@ -115,10 +116,10 @@ def main(argv=None) -> int:
     for row in relax:
         print(f"relax after a uniform c step, level 4 ({row['triangles']} tri), {row['dtype']}: "
               f"{row['seconds']:.3f} s, {row['iterations']} iterations")  # fmt: skip
-    result = dict(benchmark="shell", date=date.today().isoformat(), device=device.alias, device_name=device.name,
-                  warp=wp.config.version, parameters=PARAMETERS, forces=forces, relax=relax)  # fmt: skip
+    result = dict(benchmark="shell", date=date.today().isoformat(), **describe_device(device), parameters=PARAMETERS,
+                  forces=forces, relax=relax)  # fmt: skip
     os.makedirs(args.out, exist_ok=True)
-    path = os.path.join(args.out, f"shell_{device.alias.replace(':', '')}.json")
+    path = os.path.join(args.out, f"shell_{device_tag(device)}.json")
     write_json(path, result)
     print(f"wrote {path}")
     return 0

@@ -33,7 +33,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from numpy_shell import NumpyShell  # noqa: E402
 
 from wavewarp.coupled import Walking  # noqa: E402
-from wavewarp.device import resolve_device  # noqa: E402
+from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.dynamics import Ground, ShellDynamics  # noqa: E402
 from wavewarp.io import write_json, write_png  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
@@ -304,10 +304,10 @@ def main(argv=None) -> int:
                 print(f"{row['triangles']:>9d} tri {dtype} {row['step']:36s} substeps {row['substeps']:3d}: "
                       f"{row['steps_per_second']:9.3e} steps/s, {row['mechanics_steps_per_second']:9.3e} mechanics "
                       "steps/s", flush=True)  # fmt: skip
-    result = dict(benchmark="speed", date=date.today().isoformat(), device=device.alias, device_name=device.name,
-                  warp=wp.config.version, peaks=peaks, kernels=kernels, steps=steps)  # fmt: skip
+    result = dict(benchmark="speed", date=date.today().isoformat(), **describe_device(device), peaks=peaks,
+                  kernels=kernels, steps=steps)  # fmt: skip
     os.makedirs(args.out, exist_ok=True)
-    stem = os.path.join(args.out, f"speed_{device.alias.replace(':', '')}")
+    stem = os.path.join(args.out, f"speed_{device_tag(device)}")
     write_json(stem + ".json", result)
     chart(result, stem + ".png")
     print(f"wrote {stem}.json, {stem}.png")

@@ -54,7 +54,6 @@ import argparse
 import functools
 import math
 import os
-import platform
 import sys
 import time
 from datetime import date
@@ -64,6 +63,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import warp as wp
 
+from wavewarp.device import describe_device, device_tag
 from wavewarp.dynamics import ShellDynamics
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
@@ -333,7 +333,7 @@ def chart(result, path) -> None:
 
 def save_json(args, device, result) -> str:
     """Write the result (also after every row, so an interrupted run keeps its rows)."""
-    name = f"stability_{device.alias.replace(':', '')}{'_quick' if args.quick else ''}"
+    name = f"stability_{device_tag(device)}{'_quick' if args.quick else ''}"
     path = os.path.join(args.out, name + ".json")
     write_json(path, result)
     return path
@@ -364,11 +364,7 @@ def main(argv=None) -> int:
     result = {
         "benchmark": "stability",
         "date": date.today().isoformat(),
-        "device": device.alias,
-        "device_name": device.name,
-        "host": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "warp": wp.config.version,
+        **describe_device(device),
         "options": {**vars(args), "levels": levels, "shell_levels": shell_levels, "thicknesses": thicknesses},
         "quick": args.quick,
         "resolution": resolution,

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import platform
+
 import numpy as np
 import warp as wp
 
@@ -20,6 +23,17 @@ def resolve_device(device=None) -> wp.context.Device:
     except (RuntimeError, ValueError) as error:
         available = ", ".join(d.alias for d in wp.get_devices())
         raise ValueError(f"device {device!r} is not available ({error}); available: {available}") from None
+
+
+def device_tag(device) -> str:
+    """The device's alias as a file-name part: "cpu", "cuda0"."""
+    return device.alias.replace(":", "")
+
+
+def describe_device(device) -> dict:
+    """What a benchmark result records of the machine it ran on."""
+    return {"device": device.alias, "device_name": device.name, "host": platform.processor() or platform.machine(),
+            "cpu_count": os.cpu_count(), "warp": wp.config.version}  # fmt: skip
 
 
 def resolve_dtype(dtype="float32"):
