@@ -166,7 +166,8 @@ def test_shell_at_rest_on_the_ground_stays_put(dtype, bound):
     1.2e-7 in float32). Placed on an asymmetric spot it first rocks to an equilibrium, slowly: the
     tanh friction is viscous at low speed, drag μ k_f g per unit mass (docs/walkers.md)."""
     mesh = icosphere(1.0, 2)
-    run, _ = settle_on_ground(mesh.turned(mesh.vertices[0], [0.0, 0.0, -1.0]), 1e5, until=25.0, dtype=dtype)
+    apex = mesh.vertices[np.flatnonzero(mesh.valence == 5)[0]]  # one of the icosahedron's twelve
+    run, _ = settle_on_ground(mesh.turned(apex, [0.0, 0.0, -1.0]), 1e5, until=25.0, dtype=dtype)
     start = run.center_of_mass()
     run.advance(10000)
     drift = run.center_of_mass() - start

@@ -163,6 +163,35 @@ def test_float32_relax_meets_its_default_tolerance(device):
     assert np.all(np.diff(history) <= 1e-7 * abs(history[0]))  # monotone within float32 round-off
 
 
+def test_captured_relaxation_runs_the_host_loops_arithmetic_and_serves_every_later_call(device):
+    """The relaxation is one captured device loop (docs/shell.md); with a callback the same loop
+    body runs from the host. Both take the same steps (bitwise on the CPU, up to the order of
+    atomic sums on a GPU), and the shell's one graph honours each call's tolerance and budget."""
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, 0.05, 1.0, AC=0.3, AI=0.4, volume_penalty=0.5, device=device, **F64)
+    c = 0.5 + 0.5 * np.tanh(4 * mesh.vertices[:, 2])
+    seen = []
+    host = shell.relax(mesh.vertices, c, tol=1e-8, callback=lambda *row: seen.append(row))
+    host_history = np.array(shell.relax_history)
+    captured = shell.relax(mesh.vertices, c, tol=1e-8)
+    exact = device == "cpu"
+    assert len(shell.relax_history) == len(host_history) or not exact
+    np.testing.assert_allclose(captured, host, rtol=0, atol=0 if exact else 1e-9)
+    assert [row[0] for row in seen] == list(range(len(host_history)))
+    assert np.array_equal([row[1] for row in seen], host_history)
+    assert seen[-1][2] <= 1e-8 < seen[-2][2]
+
+    def residual(x):
+        return np.linalg.norm(shell.forces(x, c), axis=1).max() / shell.force_scale()
+
+    tighter = shell.relax(mesh.vertices, c, tol=1e-11, max_iterations=30000)  # a larger history
+    assert residual(tighter) <= 1e-11 < residual(captured)
+    again = shell.relax(tighter, c, tol=1e-6)  # already in equilibrium: no step
+    assert len(shell.relax_history) == 1 and np.array_equal(again, tighter)
+    with pytest.raises(RelaxationError, match="after 2 iterations"):
+        shell.relax(mesh.vertices, c, tol=1e-8, max_iterations=2)
+
+
 def test_relax_says_how_far_it_got():
     mesh = icosphere(1.0, 2)
     shell = Shell(mesh, 0.05, 1.0, AC=0.5, device="cpu", **F64)

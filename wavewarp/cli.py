@@ -203,7 +203,7 @@ def _build_mesh(args):
         mesh = meshes.load(args.mesh)
     if mesh.needs_refinement:
         print(f"{args.mesh}: a triangle touches two extraordinary vertices; refined once by Loop subdivision", file=sys.stderr)
-        mesh = mesh.subdivided(1)
+        mesh = mesh.refined_for_patches()
     return mesh
 
 

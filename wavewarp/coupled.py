@@ -6,7 +6,8 @@
 One `QuasiStatic.step()`:
 1. the wave advances `chemistry_steps` steps on the device (its own stability guard);
 2. the shell's active reference ā, b̄ follows the new control concentrations (device to device);
-3. `relax` finds the new quasi-static equilibrium, warm-started from the last one;
+3. `relax` finds the new quasi-static equilibrium, warm-started from the last one (one captured
+   device loop, positions device to device: wavewarp/relax.py);
 4. deformation-sensitive runs move the wave's operator to the new surface (`update`), which
    makes the wave re-check its time step; the insensitive twin keeps the rest surface.
 
@@ -80,7 +81,7 @@ class QuasiStatic:
     def _equilibrate(self) -> None:
         self.shell.update_reference(self.wave.c)
         try:
-            x = relax(self.shell, self._x, self.tol, self.max_iterations)
+            relax(self.shell, self._x, self.tol, self.max_iterations, out=self._x)  # device to device
         except RelaxationError as error:
             if error.round_off and error.residual <= ROUND_OFF_SLACK * self.tol:
                 self.round_off_stops += 1  # the dtype's round-off floor just above tol (sharp corners, float32)
@@ -88,9 +89,8 @@ class QuasiStatic:
                 self.unconverged += 1  # overdamped: the shell lags its reference, the next step goes on from here
             else:
                 raise
-            x = error.x
+            self._x.assign(error.x.astype(self.shell._real))
         self.relax_iterations.append(len(self.shell.relax_history) - 1)
-        self._x.assign(x.astype(self.shell._real))
         if self.sensitive:
             self.operator.update(self._x)
 

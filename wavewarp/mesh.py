@@ -3,7 +3,9 @@
 A `Mesh` is validated on construction; a bad mesh raises `ValueError` naming the first
 offending element and the fix. Generators return meshes with well-shaped triangles and
 outward normals; `icosphere` places its control points so that their *limit* points lie on
-the requested sphere.
+the requested sphere. Generators and `load` number vertices and triangles for memory locality
+(`Mesh.reordered`, docs/geometry.md "Numbering"): neighbouring triangles, and the control
+vertices of one patch, lie close together in the device arrays.
 """
 
 from __future__ import annotations
@@ -104,8 +106,51 @@ class Mesh:
         return Mesh(vertices, triangles)
 
     def refined_for_patches(self) -> Mesh:
-        """This mesh, or its Loop refinement where two extraordinary vertices share a triangle."""
-        return self.subdivided(1) if self.needs_refinement else self
+        """This mesh, or its Loop refinement where two extraordinary vertices share a triangle
+        (renumbered for locality: `reordered(keep_triangle_order=True)`)."""
+        return self.subdivided(1).reordered(keep_triangle_order=True) if self.needs_refinement else self
+
+    def reordering(self, keep_triangle_order: bool = False) -> tuple:
+        """(vertex_order, triangle_order) of `reordered`: its vertex i is this mesh's vertex
+        vertex_order[i], its triangle t this mesh's triangle triangle_order[t]."""
+        if keep_triangle_order:
+            triangle_order = np.arange(self.n_triangles)
+        else:
+            triangle_order = np.argsort(hilbert_keys(self.vertices[self.triangles].mean(axis=1)), kind="stable")
+        corners = self.triangles[triangle_order].reshape(-1)
+        _, first_use = np.unique(corners, return_index=True)  # every vertex is used (validated)
+        return np.argsort(first_use, kind="stable"), triangle_order
+
+    def reordered(self, keep_triangle_order: bool = False) -> Mesh:
+        """The same mesh numbered for memory locality (docs/geometry.md "Numbering").
+
+        Triangles follow a 3-D Hilbert curve through their centroids (or keep their order, for
+        meshes already ordered locally such as Loop refinements: children 4t..4t+3 of triangle t);
+        vertices are numbered in the order the triangles first use them. A pure permutation: the
+        positions, and each triangle's corners in their order (orientation, patch types), are
+        unchanged. Applying it twice gives the same mesh as once.
+        """
+        vertex_order, triangle_order = self.reordering(keep_triangle_order)
+        return self.permuted(vertex_order, triangle_order)
+
+    def permuted(self, vertex_order, triangle_order) -> Mesh:
+        """The mesh renumbered: vertex i is this mesh's vertex vertex_order[i], triangle t this
+        mesh's triangle triangle_order[t] (both permutations)."""
+        vertex_order = np.asarray(vertex_order, dtype=np.int64)
+        triangle_order = np.asarray(triangle_order, dtype=np.int64)
+        for name, order, n in (("vertex_order", vertex_order, self.n_vertices),
+                               ("triangle_order", triangle_order, self.n_triangles)):  # fmt: skip
+            if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
+                raise ValueError(f"{name} must be a permutation of 0..{n - 1}")
+        new_index = np.empty(self.n_vertices, dtype=np.int64)
+        new_index[vertex_order] = np.arange(self.n_vertices)
+        # a renumbering of a valid mesh is valid: skip the validation (seconds at a million triangles)
+        mesh = Mesh.__new__(Mesh)
+        mesh.vertices = self.vertices[vertex_order]
+        mesh.triangles = new_index[self.triangles[triangle_order]].astype(np.int32)
+        mesh.vertices.setflags(write=False)
+        mesh.triangles.setflags(write=False)
+        return mesh
 
     def limit_mask_matrix(self):
         """Rows (i, j, weight) of the limit-position mask: limit = L @ control (SPEC §8)."""
@@ -116,6 +161,46 @@ class Mesh:
         cols = np.concatenate([np.arange(self.n_vertices), e[:, 1], e[:, 0]])
         vals = np.concatenate([1.0 - n * chi, chi[e[:, 0]], chi[e[:, 1]]])
         return rows, cols, vals
+
+
+# ---------------------------------------------------------------------------------------------
+# Numbering for locality (docs/geometry.md "Numbering")
+
+
+def hilbert_keys(points, bits: int = 16) -> np.ndarray:
+    """Position of each point (n, 3) along a 3-D Hilbert curve through the points' bounding cube,
+    2^bits cells per side (Skilling 2004, "Programming the Hilbert curve", vectorised)."""
+    points = np.asarray(points, dtype=np.float64)
+    if not 1 <= bits <= 21:
+        raise ValueError(f"bits must lie in 1..21 (a 63-bit key), got {bits!r}")
+    lo = points.min(axis=0)
+    side = float(np.max(points.max(axis=0) - lo)) or 1.0
+    cells = np.uint64(2**bits - 1)
+    x = np.minimum(np.floor((points - lo) / side * float(2**bits)), float(cells)).astype(np.uint64).T.copy()
+    one = np.uint64(1)
+    q = one << np.uint64(bits - 1)
+    while q > one:  # Skilling's AxesToTranspose: undo the excess work, from the top bit down
+        p = q - one
+        for i in range(3):
+            high = (x[i] & q) != 0
+            x[0] = np.where(high, x[0] ^ p, x[0])
+            swap = np.where(high, np.uint64(0), (x[0] ^ x[i]) & p)
+            x[0] ^= swap
+            x[i] ^= swap
+        q >>= one
+    for i in range(1, 3):  # Gray encode
+        x[i] ^= x[i - 1]
+    flip = np.zeros(x.shape[1], dtype=np.uint64)
+    q = one << np.uint64(bits - 1)
+    while q > one:
+        flip = np.where((x[2] & q) != 0, flip ^ (q - one), flip)
+        q >>= one
+    x ^= flip
+    keys = np.zeros(x.shape[1], dtype=np.uint64)
+    for b in range(bits - 1, -1, -1):  # interleave: the transposed form to one integer
+        for i in range(3):
+            keys = (keys << one) | ((x[i] >> np.uint64(b)) & one)
+    return keys
 
 
 # ---------------------------------------------------------------------------------------------
@@ -263,14 +348,17 @@ def _components(n_vertices: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 # Generators
 
 
-def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True) -> Mesh:
+def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True, reorder: bool = True) -> Mesh:
     """Sphere of `radius` from an icosahedron refined `level` times (20·4^level triangles).
 
     The icosahedron is refined by Loop subdivision and projected onto the sphere, which
     spaces the vertices smoothly (midpoint splitting leaves kinks in the spacing along the
     icosahedron's edges that cost an O(1) mean-curvature error there; docs/geometry.md).
     With `limit=True` (default) the control points are then placed so that their Loop limit
-    points lie on the sphere; otherwise the control points themselves do.
+    points lie on the sphere; otherwise the control points themselves do. The triangles stay in
+    subdivision order (already local), the vertices are renumbered in the order the triangles
+    first use them (`Mesh.reordered(keep_triangle_order=True)`; `reorder=False`: the subdivision's
+    own numbering, edge points appended per level).
     """
     positive("radius", radius)
     if int(level) != level or level < 0:
@@ -300,7 +388,7 @@ def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True) -> Mes
     mesh = Mesh(on_sphere, triangles)
     if limit:
         mesh = Mesh(control_points_for_limit(mesh, on_sphere), triangles)
-    return mesh
+    return mesh.reordered(keep_triangle_order=True) if reorder else mesh
 
 
 def control_points_for_limit(mesh: Mesh, targets, tol: float = 1e-14, max_iter: int = 1000):
@@ -351,13 +439,15 @@ def _merge(parts):
     return points[first], inverse.reshape(-1)[triangles]
 
 
-def cube(edge: float = 1.0, divisions: int = 4) -> Mesh:
+def cube(edge: float = 1.0, divisions: int = 4, *, reorder: bool = True) -> Mesh:
     """Cube of control-mesh `edge` centred at the origin, each face cut into divisions² squares.
 
     `divisions` must be even; each square is split along the diagonal pointing to its face
     centre, so the mesh has the full symmetry of the cube: corners have valence 6, face
     centres 8 and the midpoints of the cube's edges 4. With divisions >= 4 no triangle
-    touches two extraordinary vertices.
+    touches two extraordinary vertices. The triangles run face by face, row by row (already
+    local); the vertices are numbered in the order the triangles first use them
+    (`Mesh.reordered(keep_triangle_order=True)`) unless `reorder=False`.
     """
     positive("edge", edge)
     _check_even_divisions(divisions)
@@ -372,14 +462,16 @@ def cube(edge: float = 1.0, divisions: int = 4) -> Mesh:
             dv = np.cross(normal, du)
             origin = h * normal - 0.5 * du - 0.5 * dv
             parts.append(_grid_face(origin, du, dv, divisions, toward_centre=True))
-    return Mesh(*_merge(parts))
+    mesh = Mesh(*_merge(parts))
+    return mesh.reordered(keep_triangle_order=True) if reorder else mesh
 
 
-def prism(edge: float = 1.0, divisions: int = 4) -> Mesh:
+def prism(edge: float = 1.0, divisions: int = 4, *, reorder: bool = True) -> Mesh:
     """Triangular prism with all edges of length `edge`, centred at the origin, axis along z.
 
     The equilateral caps are cut into divisions² equilateral triangles, the square sides as in
     `cube` (diagonals towards the face centre; `divisions` even). Corners have valence 5.
+    Numbered for locality as `cube` (`Mesh.reordered(keep_triangle_order=True)`) unless `reorder=False`.
     """
     positive("edge", edge)
     _check_even_divisions(divisions)
@@ -395,7 +487,8 @@ def prism(edge: float = 1.0, divisions: int = 4) -> Mesh:
         a, b = base[k], base[(k + 1) % 3]
         origin = a - 0.5 * up
         parts.append(_grid_face(origin, b - a, up, n, toward_centre=True))
-    return Mesh(*_merge(parts))
+    mesh = Mesh(*_merge(parts))
+    return mesh.reordered(keep_triangle_order=True) if reorder else mesh
 
 
 def _triangle_cap(corners, n, flip):
@@ -426,11 +519,14 @@ def _check_even_divisions(divisions):
 # Files
 
 
-def load(path, *, weld: bool = True) -> Mesh:
+def load(path, *, weld: bool = True, reorder: bool = True) -> Mesh:
     """Read a closed triangle mesh from any file meshio reads.
 
     With `weld=True` (default) coincident vertices are merged, as formats such as STL store
-    each triangle's corners separately; vertices used by no triangle are dropped.
+    each triangle's corners separately; vertices used by no triangle are dropped. With
+    `reorder=True` (default) the mesh is numbered for locality (`Mesh.reordered`: the file's
+    order, or the weld's, sorted by coordinates, can scatter a patch over the vertex array);
+    `reorder=False` keeps that order (the file's own with `weld=False`, less unused vertices).
     """
     import meshio
 
@@ -455,7 +551,8 @@ def load(path, *, weld: bool = True) -> Mesh:
     if weld and np.all(np.isfinite(points)):
         points, triangles = _merge([(points[:, :3], triangles)])
     used, triangles = np.unique(triangles, return_inverse=True)
-    return Mesh(points[used], triangles.reshape(-1, 3))
+    mesh = Mesh(points[used], triangles.reshape(-1, 3))
+    return mesh.reordered() if reorder else mesh
 
 
 def save(mesh: Mesh, path) -> None:

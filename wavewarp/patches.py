@@ -23,7 +23,7 @@ from .subdivision import (
     patch_basis,
     regular_rings,
 )
-from .topology import Topology
+from .topology import Topology, unique_keys
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,39 @@ class PatchTables:
         per_triangle = 4 * (len(self.patch_vertices) + 1 + self.n_triangles) / self.n_triangles
         shared = scalar_bytes * self.basis.size / self.n_triangles
         return per_triangle + shared
+
+    def locality(self, vertex_bytes: int = 12, warp: int = 32, block: int = 256, sector: int = 32) -> dict:
+        """How scattered the patch gathers are in a per-vertex array of `vertex_bytes` per vertex
+        (float32 vec3: 12), one thread per triangle (docs/geometry.md "Numbering"):
+
+        * `span`: mean over triangles of the largest minus the smallest control-vertex index;
+        * `warp_sectors`: distinct `sector`-byte sectors that the warp-wide reads of the k-th patch
+          vertex touch (`warp` consecutive triangles), summed over k, per triangle: the L1-to-L2
+          traffic of one patch gather, or of one scatter of atomics, in sectors;
+        * `block_sectors`: distinct sectors of the union of `block` consecutive triangles' patches,
+          per triangle: what a thread block must read at least.
+        """
+        sizes = np.diff(self.patch_start)
+        k = np.arange(sizes.max())
+        valid = k[None, :] < sizes[:, None]
+        patches = np.zeros(valid.shape, dtype=np.int64)
+        patches[valid] = self.patch_vertices
+        span = np.where(valid, patches, -1).max(axis=1) - np.where(valid, patches, patches.max() + 1).min(axis=1)
+        first = patches * vertex_bytes // sector
+        last = (patches * vertex_bytes + vertex_bytes - 1) // sector
+        n_sectors = int(last.max()) + 1
+
+        def distinct(group):  # distinct (group, sector) pairs over the valid entries
+            groups = np.broadcast_to(group, valid.shape)[valid]
+            keys = np.concatenate([groups * n_sectors + first[valid], groups * n_sectors + last[valid]])
+            return len(unique_keys(keys))
+
+        triangle = np.arange(self.n_triangles)[:, None]
+        return {
+            "span": float(span.mean()),
+            "warp_sectors": distinct(triangle // warp * len(k) + k[None, :]) / self.n_triangles,
+            "block_sectors": distinct(triangle // block) / self.n_triangles,
+        }
 
 
 def build_patch_tables(triangles: np.ndarray, n_vertices: int, rule: str = "3") -> PatchTables:

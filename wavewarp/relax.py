@@ -1,6 +1,7 @@
 """Quasi-static relaxation of a Shell: preconditioned nonlinear CG (Polak–Ribière+) with an
 Armijo line search on a parabolic step estimate (SPEC §3; choice and measurements in
-docs/shell.md). All vectors live on the device; each iteration reads a few scalars back.
+docs/shell.md). Vectors and the line search's scalars live on the device: a relaxation is one
+captured `wp.capture_while` loop, launched once, its result read once.
 """
 
 from __future__ import annotations
@@ -8,9 +9,32 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .kernels.relax import direction_kernel, dot_kernel, precondition_kernel, reductions_kernel, step_kernel
+from .kernels import relax as kernels_relax
+from .kernels import reduce as kernels_reduce
+from .kernels import shell as kernels_shell
+from .kernels.relax import (
+    ACCEPTED,
+    BUDGET_SPENT,
+    CONVERGED,
+    ENERGY,
+    FLAGS_SIZE,
+    ITERATION,
+    RESIDUAL,
+    SEARCH_SIZE,
+    STATUS,
+    TOL,
+    accept_kernel,
+    beta_kernel,
+    direction_kernel,
+    iteration_kernel,
+    line_search_kernel,
+    restart_kernel,
+    slope_kernel,
+    start_kernel,
+    start_search_kernel,
+    trial_kernel,
+)
 
-ARMIJO = 1e-4
 # relative round-off of the energy sum (float64 accumulation of float32 or float64 terms)
 ENERGY_NOISE = {wp.float32: 1e-7, wp.float64: 1e-12}
 
@@ -28,104 +52,120 @@ def _inverse_stiffness(shell) -> np.ndarray:
     return np.full(mesh.n_vertices, 1.0 / stiffness)
 
 
-def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None) -> np.ndarray:
-    device, vec3, scalar = shell.device, shell.vec3, shell.scalar
-    n = shell.mesh.n_vertices
-    noise = ENERGY_NOISE[scalar]
-    with wp.ScopedDevice(device):
-        x = wp.clone(x)
-        trial = wp.empty_like(x)
-        forces, trial_forces = wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3)
-        s, s_old, direction = wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3)
-        inverse_stiffness = wp.array(_inverse_stiffness(shell).astype(shell._real), dtype=scalar)
-        energy, trial_energy = wp.zeros(1, dtype=wp.float64), wp.zeros(1, dtype=wp.float64)
-        sums = wp.zeros(4, dtype=scalar)
+class Relaxation:
+    """Preconditioned nonlinear CG (Polak–Ribière+) for one shell, resident on its device.
 
-    def evaluate(at, f, e):
-        shell.forces_device(at, f, e)
-        return float(e.numpy()[0])
-
-    def reduce():
-        sums.zero_()
-        wp.launch(reductions_kernel, dim=n, inputs=[forces, s, s_old, direction], outputs=[sums], device=device)
-        return sums.numpy().astype(np.float64)
-
-    force_scale = shell.force_scale()
-    e = evaluate(x, forces, energy)
-    wp.launch(precondition_kernel, dim=n, inputs=[forces, inverse_stiffness], outputs=[s], device=device)
-    wp.copy(direction, s)
-    fs, _, fd, fmax = reduce()
-    alpha = 1.0
-    history = [e]
-    for iteration in range(max_iterations):
-        residual = fmax / force_scale
-        if callback is not None:
-            callback(iteration, e, residual)
-        if residual <= tol:
-            shell.relax_history = history
-            return x.numpy().astype(np.float64)
-        slope = -fd  # dE/dα along d (< 0)
-        alpha, e_new = _line_search(shell, x, direction, trial, trial_forces, trial_energy, e, slope, alpha, noise,
-                                    evaluate)  # fmt: skip
-        if alpha == 0.0:
-            break
-        x, trial = trial, x
-        forces, trial_forces = trial_forces, forces
-        energy, trial_energy = trial_energy, energy
-        e = e_new
-        history.append(e)
-        wp.copy(s_old, s)
-        wp.launch(precondition_kernel, dim=n, inputs=[forces, inverse_stiffness], outputs=[s], device=device)
-        fs_new, f_ds, _, _ = reduce()
-        beta = max(0.0, f_ds / fs) if fs > 0 else 0.0
-        wp.launch(direction_kernel, dim=n, inputs=[s, scalar(beta)], outputs=[direction], device=device)
-        fs, _, fd, fmax = reduce()
-        fs = fs_new
-        if fd <= 0.0:  # not a descent direction: restart along the preconditioned force
-            wp.copy(direction, s)
-            fs, _, fd, fmax = reduce()
-    shell.relax_history = history
-    from .shell import RelaxationError
-
-    residual = fmax / force_scale
-    raise RelaxationError(
-        f"relax stopped after {len(history) - 1} iterations at residual max|F|/(Y h ℓ̄) = {residual:.3g}, "
-        f"{residual / tol:.3g}× the tolerance {tol:g}"
-        + (" (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
-           if alpha == 0.0 else "; raise max_iterations or tol"),  # fmt: skip
-        residual, x.numpy().astype(np.float64), round_off=alpha == 0.0,
-    )  # fmt: skip
-
-
-def _line_search(shell, x, direction, trial, trial_forces, trial_energy, e0, slope, alpha, noise, evaluate):
-    """Step along d: secant estimate of dE/dα = 0 from the slopes at 0 and α, then backtracking.
-
-    A step is accepted when it satisfies Armijo's condition, or, where the energy change is
-    below round-off (float32 near equilibrium), when it keeps E within round-off and reduces
-    the slope |dE/dα| or still descends. Returns (α, E(x + α d)), or (0, e0) when no step helps.
+    Vectors and the scalar state of the line search live on the device; one loop pass evaluates
+    one trial point and, when the search accepts it, updates the CG direction (kernels/relax.py).
+    The whole relaxation runs as one `wp.capture_while` loop, captured once per shell as a graph
+    (CUDA, and Warp's CPU graphs), so a relaxation costs one launch and one read of its result.
     """
-    n = shell.mesh.n_vertices
-    device, scalar = shell.device, shell.scalar
-    dot = wp.zeros(1, dtype=scalar, device=device)
 
-    def at(a):
-        wp.launch(step_kernel, dim=n, inputs=[x, direction, scalar(a)], outputs=[trial], device=device)
-        e = evaluate(trial, trial_forces, trial_energy)
-        dot.zero_()
-        wp.launch(dot_kernel, dim=n, inputs=[trial_forces, direction], outputs=[dot], device=device)
-        return e, -float(dot.numpy()[0])
+    def __init__(self, shell):
+        self.shell = shell
+        n, vec3, scalar = shell.mesh.n_vertices, shell.vec3, shell.scalar
+        with wp.ScopedDevice(shell.device):
+            self.x, self.trial = wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3)
+            self.forces, self.trial_forces = wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3)
+            self.s, self.s_old, self.direction = (wp.zeros(n, dtype=vec3) for _ in range(3))
+            self.inverse_stiffness = wp.array(_inverse_stiffness(shell).astype(shell._real), dtype=scalar)
+            self.energy, self.trial_energy = wp.zeros(1, dtype=wp.float64), wp.zeros(1, dtype=wp.float64)
+            self.sums, self.dot = wp.zeros(4, dtype=scalar), wp.zeros(1, dtype=scalar)
+            self.search = wp.zeros(SEARCH_SIZE, dtype=wp.float64)
+            self.flags, self.condition = wp.zeros(FLAGS_SIZE, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
+        self.history = None  # E after each accepted step, capacity max_iterations + 1
+        self._graph = None
+        # autodiff forces allocate per evaluation (Tape): they run the same loop from the host
+        self.capture = shell.gradient != "autodiff"
 
-    e1, slope1 = at(alpha)
-    candidate = alpha * slope / (slope - slope1) if slope1 > slope else 4 * alpha
-    candidate = min(candidate, 4 * alpha)
-    tolerance = noise * max(abs(e0), 1e-300)
-    for _ in range(40):
-        e, slope_new = (e1, slope1) if candidate == alpha else at(candidate)
-        armijo = e <= e0 + ARMIJO * candidate * slope
-        # below round-off (float32): accept a step that keeps E within round-off and either
-        # flattens the slope or still descends (dE/dα ≤ 0 at both ends: negative curvature near
-        # a buckling instability, where energy differences drown in round-off)
-        if armijo or (e <= e0 + tolerance and (abs(slope_new) < abs(slope) or slope_new <= 0.0)):
-            return candidate, e
-        candidate *= 0.5
-    return 0.0, e0
+    def run(self, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None):
+        """Relax from x to max |F| <= tol · Y h ℓ̄; returns the positions (V, 3) in float64, or, with
+        `out` (a device array, may be x), writes them there and returns None."""
+        shell = self.shell
+        if self.history is None or len(self.history) < max_iterations + 1:
+            self.history = wp.zeros(max_iterations + 1, dtype=wp.float64, device=shell.device)
+            self._graph = None
+        parameters = [tol, max_iterations, shell.force_scale(), ENERGY_NOISE[shell.scalar]]
+        self.search[TOL:].assign(np.array(parameters, dtype=np.float64))
+        wp.copy(self.x, x)
+        with wp.ScopedDevice(shell.device):
+            if callback is not None or not self.capture:
+                self._start()
+                self._loop(callback)
+            else:
+                if self._graph is None:
+                    for module in (kernels_relax, kernels_shell, kernels_reduce):
+                        wp.load_module(module, device=shell.device)
+                    with wp.ScopedCapture(device=shell.device, force_module_load=False) as scope:
+                        self._start()
+                        wp.capture_while(self.condition, self._pass)
+                    self._graph = scope.graph
+                wp.capture_launch(self._graph)
+        return self._result(tol, out)
+
+    def _start(self) -> None:
+        shell, n = self.shell, self.shell.mesh.n_vertices
+        shell.forces_device(self.x, self.forces, self.energy)
+        self.sums.zero_()
+        wp.launch(start_kernel, dim=n, inputs=[self.forces, self.inverse_stiffness], outputs=[self.s, self.direction, self.sums])
+        wp.launch(start_search_kernel, dim=1, inputs=[self.energy, self.sums],
+                  outputs=[self.search, self.flags, self.history, self.condition])  # fmt: skip
+
+    def _pass(self) -> None:
+        """Evaluate x + α d, let the line search decide, and after an accepted step update d."""
+        shell, n = self.shell, self.shell.mesh.n_vertices
+        wp.launch(trial_kernel, dim=n, inputs=[self.x, self.direction, self.search], outputs=[self.trial, self.dot, self.flags])
+        shell.forces_device(self.trial, self.trial_forces, self.trial_energy)
+        wp.launch(slope_kernel, dim=n, inputs=[self.trial_forces, self.direction], outputs=[self.dot])
+        wp.launch(line_search_kernel, dim=1, inputs=[self.trial_energy, self.dot],
+                  outputs=[self.search, self.flags, self.condition])  # fmt: skip
+        self.sums.zero_()
+        wp.launch(accept_kernel, dim=n, inputs=[self.flags, self.trial, self.trial_forces, self.inverse_stiffness],
+                  outputs=[self.x, self.forces, self.s, self.s_old, self.sums])  # fmt: skip
+        wp.launch(beta_kernel, dim=1, inputs=[self.flags, self.sums], outputs=[self.search])
+        wp.launch(direction_kernel, dim=n, inputs=[self.flags, self.s, self.forces, self.search],
+                  outputs=[self.direction, self.sums])  # fmt: skip
+        wp.launch(iteration_kernel, dim=1, inputs=[self.flags, self.sums, self.search],
+                  outputs=[self.history, self.condition])  # fmt: skip
+        wp.launch(restart_kernel, dim=n, inputs=[self.flags, self.s], outputs=[self.direction])
+
+    def _loop(self, callback) -> None:
+        """The loop driven from the host: callback(iteration, E, residual) at the start and after each step."""
+        if callback is not None:
+            search = self.search.numpy()
+            callback(0, search[ENERGY], search[RESIDUAL])
+        while self.condition.numpy()[0]:
+            self._pass()
+            if callback is not None:
+                flags, search = self.flags.numpy(), self.search.numpy()
+                if flags[ACCEPTED]:
+                    callback(int(flags[ITERATION]), search[ENERGY], search[RESIDUAL])
+
+    def _result(self, tol: float, out):
+        from .shell import RelaxationError
+
+        flags, search = self.flags.numpy(), self.search.numpy()
+        iterations, status, residual = int(flags[ITERATION]), int(flags[STATUS]), float(search[RESIDUAL])
+        self.shell.relax_history = self.history.numpy()[: iterations + 1].tolist()
+        if status == CONVERGED:
+            if out is None:
+                return self.x.numpy().astype(np.float64)
+            wp.copy(out, self.x)
+            return None
+        x = self.x.numpy().astype(np.float64)
+        round_off = status != BUDGET_SPENT
+        raise RelaxationError(
+            f"relax stopped after {iterations} iterations at residual max|F|/(Y h ℓ̄) = {residual:.3g}, "
+            f"{residual / tol:.3g}× the tolerance {tol:g}"
+            + (" (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
+               if round_off else "; raise max_iterations or tol"),  # fmt: skip
+            residual, x, round_off=round_off,
+        )  # fmt: skip
+
+
+def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None):
+    """Relax `shell` from positions x (device array); the shell keeps its Relaxation (buffers, graph).
+    Returns the positions (NumPy), or writes them to the device array `out` and returns None."""
+    if shell._relaxation is None:
+        shell._relaxation = Relaxation(shell)
+    return shell._relaxation.run(x, tol, max_iterations, callback, out)

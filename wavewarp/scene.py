@@ -134,7 +134,7 @@ def scene_mesh(mesh: Mesh | None, build_default, report=print) -> Mesh:
     mesh = build_default() if mesh is None else mesh
     if mesh.needs_refinement:
         report("the mesh has triangles with two extraordinary vertices: refined once by Loop subdivision")
-        mesh = mesh.subdivided(1)
+        mesh = mesh.refined_for_patches()  # renumbered for locality, as the generators' meshes
     return mesh
 
 
@@ -685,5 +685,10 @@ def buckling_png(run, path) -> None:
 
 
 def seeded_noise(mesh: Mesh, amplitude: float, seed: int) -> np.ndarray:
-    """Positions perturbed by `amplitude` × a standard normal per coordinate (to break symmetry)."""
-    return mesh.vertices + amplitude * np.random.default_rng(seed).standard_normal(mesh.vertices.shape)
+    """Positions perturbed by `amplitude` × a standard normal per coordinate (to break symmetry).
+    The draws go to the vertices in the lexicographic order of their positions, so that a point's
+    perturbation does not depend on how the mesh numbers its vertices (`Mesh.reordered`)."""
+    draws = np.random.default_rng(seed).standard_normal(mesh.vertices.shape)
+    noise = np.empty_like(draws)
+    noise[np.lexsort(mesh.vertices.T[::-1])] = draws
+    return mesh.vertices + amplitude * noise

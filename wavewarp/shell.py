@@ -126,6 +126,7 @@ class Shell:
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
+        self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
 
     # ---------------------------------------------------------------- device-level API
     def _s(self, value) -> object:
