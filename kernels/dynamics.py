@@ -100,14 +100,17 @@ def trace_row_kernel(
     c: wp.array(dtype=Any), x: wp.array(dtype=Any), origin: int, moment: wp.array(dtype=Any),
     inverse_total_mass: Any, row: wp.array(dtype=wp.int32), trace: wp.array2d(dtype=Any),
 ):  # fmt: skip
-    """Single thread: trace[row] = [c_origin, centre of mass (3), x_origin (3)], then row += 1."""
+    """Single thread: trace[row] = [c_origin, centre of mass (3), x_origin (3)], then row += 1.
+    Rows past the buffer (steps advanced beyond one frame's) are counted, not written."""
     k = row[0]
+    row[0] = k + 1
+    if k >= trace.shape[0]:
+        return
     centre = inverse_total_mass * moment[0]
     trace[k, 0] = c[origin]
     for j in range(3):
         trace[k, 1 + j] = centre[j]
         trace[k, 4 + j] = x[origin][j]
-    row[0] = k + 1
 
 
 @wp.kernel

@@ -12,7 +12,8 @@ PARAMETERS = {
     "overdamped": Param(True, "buckling is an instability: near it a relaxation may not converge within its budget; "
                         "the paper's overdamped update lets the shell lag its reference there (counted in --json)"),
     "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
-    "noise": Param(1e-4, "position noise / R: the tiny seeded perturbation that breaks the symmetry", minimum=0.0),
+    "noise": Param(1e-4, "rest-shape imperfection / R: the tiny seeded perturbation that breaks the symmetry",
+                   minimum=0.0),
 }
 QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3, coarser than the default
 

@@ -376,3 +376,26 @@ def test_scene_defaults_are_the_accuracy_benchmarks_recommendation(scene):
         assert recommended[axis] == bench
         recommended[axis] = scene_value
     assert declared(scene) == recommended
+
+
+def test_symmetry_number_finds_an_azimuthal_mode_and_ignores_the_axisymmetric_profile():
+    """The buckling measure (Fig. S1a) on fields known in advance: an axisymmetric bulge whose
+    slope and curvature cross the front's ring reads n = 0; adding a 5-fold ripple of 0.3 h reads
+    n = 5 with that amplitude."""
+    from types import SimpleNamespace
+
+    from wavewarp.scene import symmetry_number
+
+    R, h = 10.0, 0.5
+    mesh = icosphere(R, 4)
+    run = SimpleNamespace(size=R, mesh=mesh, origin=np.array([0.0, 0.0, R]), front_start=0.0, profile_time=9.0,
+                          p={"gamma": 1.0, "thickness": h})  # fmt: skip front at θ = 0.9
+    rest = mesh.vertices
+    unit = rest / np.linalg.norm(rest, axis=1, keepdims=True)
+    theta = np.arccos(np.clip(unit[:, 2], -1, 1))
+    phi = np.arctan2(unit[:, 1], unit[:, 0])
+    bulge = 3 * h * np.exp(-((theta - 0.9) ** 2) / 0.02) + 2 * h * theta  # steep across the ring
+    assert symmetry_number(run, rest + bulge[:, None] * unit) == (0, pytest.approx(0.0, abs=0.01))
+    ripple = 0.3 * h * np.cos(5 * phi)
+    n, amplitude = symmetry_number(run, rest + (bulge + ripple)[:, None] * unit)
+    assert n == 5 and amplitude == pytest.approx(0.3, rel=0.05)

@@ -120,6 +120,25 @@ def test_insensitive_twin_keeps_the_rest_surface():
     assert masses[True] > 1e-3
 
 
+def test_steps_past_a_frame_leave_the_trace_buffer_alone():
+    """Walking.advance beyond one frame (the public API, outside advance_frame) counts the extra
+    trace rows without writing past the frame's buffer; the next frame's trace is whole and
+    continues the clock."""
+    run = walk("sphere-walker", periods=0.05, frames=1, dtype="float64")
+    buffer = run._trace_rows
+    sentinel = buffer.numpy().copy()
+    run._trace_row.zero_()
+    run.coupled.advance(3 * run.steps_per_frame)
+    assert run._trace_row.numpy()[0] == 3 * run.steps_per_frame
+    written = buffer.numpy()
+    assert np.isfinite(written).all() and not np.array_equal(written, sentinel)  # the first frame's rows were rewritten
+    start = run.wave.steps
+    run.advance_frame()
+    times = run._frame_trace[:, 0]
+    np.testing.assert_allclose(times, (start + np.arange(1, run.steps_per_frame + 1)) * run.wave.dt)
+    np.testing.assert_allclose(run._frame_trace[-1, 2:5], run.dynamics.center_of_mass(), rtol=1e-12, atol=1e-12)  # t, c, centre
+
+
 def test_bench_locomotion_quick_writes_json_and_chart(tmp_path):
     from wavewarp.cli import main as cli
 

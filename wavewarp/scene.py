@@ -162,7 +162,7 @@ class QuasiStaticWaveRun(WaveClock):
     """
 
     def __init__(self, name: str, mesh: Mesh, p: dict, *, size: float, origin, initial: dict, t_end: float,
-                 rule: str = "3", device=None, x0=None, profile=None, measure=None, figures=None):  # fmt: skip
+                 rule: str = "3", device=None, profile=None, measure=None, figures=None):  # fmt: skip
         self.name, self.mesh, self.p = name, mesh, p
         dtype = p["dtype"]
         self.shell = Shell(mesh, thickness=p["thickness"], young=p["young"], poisson=p["poisson"], AC=p["AC"],
@@ -182,7 +182,7 @@ class QuasiStaticWaveRun(WaveClock):
         self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p["frames"] / (relax_every * dt)))
         self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
-                                   tol=p["relax_tol"] or None, x0=x0, max_iterations=p["relax_iterations"],
+                                   tol=p["relax_tol"] or None, max_iterations=p["relax_iterations"],
                                    overdamped=p["overdamped"])  # fmt: skip
         self.resolved = {**p, "dt": dt, "relax_every": relax_every}
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
@@ -256,7 +256,8 @@ SPHERE_PARAMETERS = parameters_with(
     mass_corrections=Param(2, "0 = lumped mass (SPEC §5); 2 = the accurate wave shapes and speed of the "
                            "benchmarks (docs/chemistry.md)", minimum=0),  # fmt: skip
     t_end=Param(0.0, "end time; 0 = π R / γ, the wave's pole-to-pole time", minimum=0.0),
-    noise=Param(0.0, "random position perturbation / R (seeded by --seed) to break symmetry", minimum=0.0),
+    noise=Param(0.0, "random perturbation / R of the rest shape's control points (seeded by --seed): an "
+                "imperfection that breaks the symmetry", minimum=0.0),  # fmt: skip
 )
 
 
@@ -270,9 +271,10 @@ def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initi
     pole = np.array([0.0, 0.0, R])
     if initial is None:
         initial = {"kind": "gaussian", "sigma": p["width"] / R, "distance": "arc"}
-    x0 = seeded_noise(mesh, p["noise"] * R, seed) if p["noise"] > 0 else None
+    if p["noise"] > 0:  # an imperfection of the rest shape: perturbed positions alone relax back at t = 0
+        mesh = Mesh(seeded_noise(mesh, p["noise"] * R, seed), mesh.triangles)
     return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or math.pi * R / p["gamma"],
-                              device=device, x0=x0, profile=profile or meridian_curvature_radius,
+                              device=device, profile=profile or meridian_curvature_radius,
                               measure=measure or sphere_wave_measurements,
                               figures=figures or {"kymograph": kymograph_png})  # fmt: skip
 
@@ -634,8 +636,9 @@ def frame_png(run, path) -> None:
 
 def symmetry_number(run, x, threshold=0.01) -> tuple:
     """(n, amplitude): the dominant azimuthal mode m ≥ 2 of the radial displacement on the latitude
-    ring at the wave front (rest polar angle γ t / R, one control edge wide), and its amplitude in
-    units of h; n = 0 while every mode is below `threshold` h (axisymmetric)."""
+    ring at the wave front (rest polar angle γ t / R, one control edge wide), less its axisymmetric
+    trend across the ring, and its amplitude in units of h; n = 0 while every mode is below
+    `threshold` h (axisymmetric)."""
     R = run.size
     rest = run.mesh.vertices
     axis = run.origin / np.linalg.norm(run.origin)
@@ -647,8 +650,12 @@ def symmetry_number(run, x, threshold=0.01) -> tuple:
     side = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
     side /= np.linalg.norm(side)
     phi = np.arctan2(rest[ring] @ np.cross(axis, side), rest[ring] @ side)
-    radial = np.linalg.norm(np.asarray(x)[ring], axis=1)
-    radial -= radial.mean()
+    radial = np.linalg.norm(np.asarray(x)[ring], axis=1) - np.linalg.norm(rest[ring], axis=1)
+    # remove the axisymmetric profile across the band (a quadratic in θ): its slope and curvature
+    # would leak into the azimuthal modes of the ring's irregularly placed vertices
+    offset = theta[ring] - front
+    trend = np.vander(offset, 3)
+    radial -= trend @ np.linalg.lstsq(trend, radial, rcond=None)[0]
     modes = np.arange(2, max(3, ring.sum() // 2))
     amplitude = np.abs(np.exp(-1j * np.outer(modes, phi)) @ radial) * 2 / ring.sum() / run.p["thickness"]
     k = int(np.argmax(amplitude))
