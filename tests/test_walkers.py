@@ -124,14 +124,20 @@ def test_steps_past_a_frame_leave_the_trace_buffer_alone():
     """Walking.advance beyond one frame (the public API, outside advance_frame) counts the extra
     trace rows without writing past the frame's buffer; the next frame's trace is whole and
     continues the clock."""
+    import warp as wp
+
     run = walk("sphere-walker", periods=0.05, frames=1, dtype="float64")
-    buffer = run._trace_rows
-    sentinel = buffer.numpy().copy()
+    rows = run.steps_per_frame
+    # the frame's buffer as the front of a larger array: what lies behind it must stay untouched
+    backing = wp.zeros((3 * rows, run._trace_rows.shape[1]), dtype=wp.float64, device="cpu")
+    backing.assign(np.full(backing.shape, 7.0))
+    run._trace_rows = buffer = backing[:rows]
     run._trace_row.zero_()
-    run.coupled.advance(3 * run.steps_per_frame)
-    assert run._trace_row.numpy()[0] == 3 * run.steps_per_frame
+    run.coupled.advance(3 * rows)
+    assert run._trace_row.numpy()[0] == 3 * rows
     written = buffer.numpy()
-    assert np.isfinite(written).all() and not np.array_equal(written, sentinel)  # the first frame's rows were rewritten
+    assert np.isfinite(written).all() and not np.any(written == 7.0)  # the frame's rows were written
+    assert np.all(backing.numpy()[rows:] == 7.0)  # nothing past them
     start = run.wave.steps
     run.advance_frame()
     times = run._frame_trace[:, 0]

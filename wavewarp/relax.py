@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .kernels import relax as kernels_relax
+from .device import run_steps
 from .kernels import reduce as kernels_reduce
+from .kernels import relax as kernels_relax
 from .kernels import shell as kernels_shell
 from .kernels.relax import (
     ACCEPTED,
@@ -74,7 +75,7 @@ class Relaxation:
             self.search = wp.zeros(SEARCH_SIZE, dtype=wp.float64)
             self.flags, self.condition = wp.zeros(FLAGS_SIZE, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
         self.history = None  # E after each accepted step, capacity max_iterations + 1
-        self._graph = None
+        self._graphs = {}
         # autodiff forces allocate per evaluation (Tape): they run the same loop from the host
         self.capture = shell.gradient != "autodiff"
 
@@ -84,24 +85,23 @@ class Relaxation:
         shell = self.shell
         if self.history is None or len(self.history) < max_iterations + 1:
             self.history = wp.zeros(max_iterations + 1, dtype=wp.float64, device=shell.device)
-            self._graph = None
+            self._graphs = {}  # the captured loop writes the history array it was captured with
         parameters = [tol, max_iterations, shell.force_scale(), ENERGY_NOISE[shell.scalar]]
         self.search[TOL:].assign(np.array(parameters, dtype=np.float64))
         wp.copy(self.x, x)
-        with wp.ScopedDevice(shell.device):
-            if callback is not None or not self.capture:
+        if callback is not None:
+            with wp.ScopedDevice(shell.device):
                 self._start()
                 self._loop(callback)
-            else:
-                if self._graph is None:
-                    for module in (kernels_relax, kernels_shell, kernels_reduce):
-                        wp.load_module(module, device=shell.device)
-                    with wp.ScopedCapture(device=shell.device, force_module_load=False) as scope:
-                        self._start()
-                        wp.capture_while(self.condition, self._pass)
-                    self._graph = scope.graph
-                wp.capture_launch(self._graph)
+        else:
+            run_steps(self._solve, 1, device=shell.device, graphs=self._graphs,
+                      modules=(kernels_relax, kernels_shell, kernels_reduce), capture=self.capture)  # fmt: skip
         return self._result(tol, out)
+
+    def _solve(self) -> None:
+        """The whole relaxation: the start, then passes while the line search and the checks go on."""
+        self._start()
+        wp.capture_while(self.condition, self._pass)
 
     def _start(self) -> None:
         shell, n = self.shell, self.shell.mesh.n_vertices
