@@ -1,4 +1,5 @@
-"""Shell dynamics of the walkers (SPEC §3 "Walker scenes"): symplectic Euler with lumped mass."""
+"""Shell dynamics of the walkers (SPEC §3 "Walker scenes"): symplectic Euler with lumped mass, or the
+overdamped mobility model (explicit Euler on M ζ v = F)."""
 
 from typing import Any
 
@@ -86,6 +87,30 @@ def symplectic_euler_kernel(
 
 
 @wp.kernel
+def overdamped_euler_kernel(
+    forces: wp.array(dtype=Any),
+    inverse_mass: wp.array(dtype=Any),
+    rigid: wp.array(dtype=Any),
+    inverse_drag: Any,
+    gravity: Any,
+    dt: Any,
+    x: wp.array(dtype=Any),
+    v: wp.array(dtype=Any),
+):
+    """Mobility model: v = (F/M - g ẑ - a_rigid) / ζ, then x += dt v (v is what the ground sees next step).
+
+    ζ is the drag per unit mass against the lab frame; a_rigid removes the internal forces'
+    round-off net force and torque as in `symplectic_euler_kernel`.
+    """
+    i = wp.tid()
+    accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], x[i] - rigid[2])
+    accel[2] = accel[2] - gravity
+    vi = inverse_drag * accel
+    v[i] = vi
+    x[i] = x[i] + dt * vi
+
+
+@wp.kernel
 def first_moment_kernel(mass: wp.array(dtype=Any), x: wp.array(dtype=Any), moment: wp.array(dtype=Any)):
     """moment[0] += Σ M_I x_I (zeroed by the caller; launched on whole blocks)."""
     i = wp.tid()
@@ -127,6 +152,8 @@ declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]
                   correction="vec3[]")  # fmt: skip
 declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]", damping="scalar",
                   gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+declare_overloads(overdamped_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]",
+                  inverse_drag="scalar", gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3[]")
 declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar",
                   trace="scalar[,]")  # fmt: skip

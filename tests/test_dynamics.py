@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from wavewarp.dynamics import Ground, ShellDynamics
+from wavewarp.dynamics import Ground, OverdampedDynamics, ShellDynamics
 from wavewarp.geometry import limit_positions, limit_surface
 from wavewarp.mesh import cube, icosphere
 from wavewarp.shell import Shell
@@ -173,3 +173,81 @@ def test_shell_at_rest_on_the_ground_stays_put(dtype, bound):
     drift = run.center_of_mass() - start
     assert np.linalg.norm(drift[:2]) < bound
     assert abs(drift[2]) < max(bound, 1e-6)  # the last of the vertical settling
+
+
+# ---------------------------------------------------------------- overdamped mobility model
+
+
+def test_overdamped_free_fall_moves_every_point_at_the_terminal_velocity():
+    """ζ M v = -M g ẑ alone: every point falls at g/ζ from the first step, the shape unchanged."""
+    mesh = icosphere(1.0, 1)
+    shell = Shell(mesh, thickness=0.1, young=1000.0, **F64)
+    run = OverdampedDynamics(shell, density=0.7, drag=40.0, gravity=2.0)
+    run.advance(50)
+    expected = mesh.vertices - [0.0, 0.0, 2.0 / 40.0 * run.time]
+    np.testing.assert_allclose(run.positions(), expected, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(run.velocities(), np.tile([0.0, 0.0, -2.0 / 40.0], (mesh.n_vertices, 1)), atol=1e-13)
+
+
+def test_overdamped_centre_of_mass_moves_with_the_net_external_force(device, rng):
+    """Summed over the points the internal forces drop out: Σ M v = (gravity + contact + friction)/ζ at
+    the state the step starts from, every step, while a random active reference deforms the shell."""
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, thickness=0.1, young=100.0, AC=0.3, AI=0.5, device=device, dtype="float64")
+    ground = Ground(stiffness=50.0, damping=0.7, friction=0.3, sharpness=2.0)
+    lift = -limit_positions(mesh, **F64)[:, 2].min()
+    run = OverdampedDynamics(shell, density=1.0, gravity=1.5, ground=ground, c=rng.uniform(0, 1, mesh.n_vertices),
+                             x0=mesh.vertices + [0.0, 0.0, lift - 0.02])  # fmt: skip
+    assert run.drag == pytest.approx(2 * run.contact_damping)
+    for _ in range(3):
+        run.advance(20)  # the shell deforms and slips: contact and friction see a velocity
+        external = run.external_forces().sum(axis=0)  # at (x_n, v_(n-1)): what the next step sees
+        assert (run.normal_forces() > 0).sum() >= 3 and np.abs(external[:2]).max() > 0
+        run.advance(1)
+        np.testing.assert_allclose(run.momentum(), external / run.drag, rtol=1e-10, atol=1e-12 * run.total_mass)
+
+
+def test_overdamped_stability_bound_is_two_drag_over_omega_squared_and_sharp(rng):
+    """Explicit Euler on ζ ẋ = -ω² x: |1 - dt ω²/ζ| < 1, i.e. dt < 2ζ/ω²: stable at 0.97, runs away at 1.03."""
+    mesh = icosphere(1.0, 1)
+    shell = Shell(mesh, thickness=0.1, young=1000.0, **F64)
+    x0 = mesh.vertices + 1e-4 * rng.standard_normal((mesh.n_vertices, 3))
+    run = OverdampedDynamics(shell, density=1.0, drag=30.0)  # ω at the rest state, as the dense Hessian
+    omega = dense_largest_frequency(shell, run.mass)
+    assert run.stable_dt == pytest.approx(2 * 30.0 / omega**2, rel=1e-6)
+    stable = OverdampedDynamics(shell, density=1.0, drag=30.0, x0=x0, dt=0.97 * run.stable_dt)
+    stable.advance(3000)
+    assert np.abs(stable.velocities()).max() < 1e-3 * 1e-4 / stable.dt  # decayed
+    unstable = OverdampedDynamics(shell, density=1.0, drag=30.0, x0=x0, dt=1.03 * run.stable_dt, check_dt=False)
+    assert runs_away(unstable, steps=3000)
+    with pytest.raises(TimeStepError, match=r"dt < 2ζ/ω²"):
+        OverdampedDynamics(shell, density=1.0, drag=30.0, dt=1.03 * run.stable_dt)
+
+
+def test_overdamped_gradient_flow_reaches_the_closed_form_radius():
+    """No ground, no gravity: the mobility model is a gradient flow and comes to rest at the
+    quasi-static equilibrium: under uniform c, the closed-form sphere radius (SPEC §8)."""
+    from wavewarp.benchmarks.accuracy import closed_form_stretch
+
+    R, h, AC, AI = 1.0, 0.05, 0.3, 0.5
+    mesh = icosphere(R, 3)
+    shell = Shell(mesh, thickness=h, young=1.0, AC=AC, AI=AI, **F64)
+    run = OverdampedDynamics(shell, density=1.0, drag=1.0, c=np.ones(mesh.n_vertices))
+    run.advance(4000)
+    stretch = closed_form_stretch(AC, AI, h, 0.0, "koiter")
+    radius = np.linalg.norm(limit_positions(mesh, run.positions(), **F64), axis=1).mean()
+    assert abs(radius / R - stretch) <= 1e-3 * abs(1 - stretch)
+    assert np.abs(run.velocities()).max() < 1e-6 * R / run.dt  # at rest
+
+
+def test_overdamped_refuses_a_drag_the_lagged_contact_cannot_follow():
+    mesh = icosphere(1.0, 1)
+    shell = Shell(mesh, thickness=0.1, young=1000.0, **F64)
+    ground = Ground(damping=5.0)
+    eta = ShellDynamics(shell, density=1.0, ground=ground).contact_damping
+    with pytest.raises(ValueError, match="does not exceed the ground's damping per unit mass"):
+        OverdampedDynamics(shell, density=1.0, ground=ground, drag=0.9 * eta)
+    with pytest.raises(ValueError, match="there is no ground: give the drag"):
+        OverdampedDynamics(shell, density=1.0)
+    with pytest.raises(ValueError, match="no background damping"):
+        OverdampedDynamics(shell, density=1.0, drag=1.0, damping=0.1)

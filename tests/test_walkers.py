@@ -106,6 +106,19 @@ def test_mirrored_origin_mirrors_the_walk(scene):
     assert np.abs(com[0][:, 1]).max() < 1e-8 * scale
 
 
+def test_overdamped_walker_moves_only_as_far_as_friction_can_drag_it():
+    """`mechanics=overdamped` (the mobility model, docs/walkers.md "Which mechanics"): the drag is
+    2 η_ground by default, and the centre of mass moves at (net external force)/(ζ ΣM), whose
+    horizontal part, friction, is at most μ W: |Δx_com| ≤ μ g t / ζ over the wave's time t."""
+    run = walk("sphere-walker", periods=0.15, frames=1, mechanics="overdamped")
+    dynamics = run.dynamics
+    assert run.resolved["drag"] == pytest.approx(2 * dynamics.contact_damping) and dynamics.drag > 0
+    assert run.resolved["mechanics_dt"] <= 2 * dynamics.drag / dynamics.omega_max**2
+    moved = run.trace[-1, 2:4] - run.trace[0, 2:4]
+    bound = run.p["friction"] * run.p["gravity"] * (run.trace[-1, 0] - run.trace[0, 0]) / dynamics.drag
+    assert 0 < np.linalg.norm(moved) <= bound
+
+
 def test_insensitive_twin_keeps_the_rest_surface():
     """`sensitive=false`: the wave's operator stays on the rest shell (its mass is the rest one),
     while the sensitive run's follows the shell (its mass moves off the rest one)."""

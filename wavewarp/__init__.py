@@ -12,7 +12,7 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+source"
 
-from .dynamics import Ground, ShellDynamics  # noqa: E402
+from .dynamics import Ground, OverdampedDynamics, ShellDynamics  # noqa: E402
 from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
 from .laplace import LaplaceBeltrami  # noqa: E402
 from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
@@ -21,7 +21,7 @@ from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, gau
 
 __all__ = [
     "BlowUpError", "FitzHughNagumo", "Ground", "LaplaceBeltrami", "LimitSurface", "Mesh", "OscillationError",
-    "RelaxationError", "Shell",
+    "OverdampedDynamics", "RelaxationError", "Shell",
     "ShellDynamics", "Telegraph",
     "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism", "sample_points", "save",
     "steady_front", "__version__",

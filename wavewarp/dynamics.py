@@ -16,6 +16,9 @@ eigenvalue of M⁻¹H (H the Hessian of the shell energy, by Lanczos on central 
 differences) and ζ = (η + η_ground) / 2ω, η_ground = β max_J (Lᵀ1)_J / M_J the contact damping
 per unit mass. The contact stiffness 2k|z| is small against the shell's at the scenes'
 penetrations; a runaway it causes is caught by the blow-up check.
+
+`OverdampedDynamics` is the mobility model of SPEC §3 (ζ M v = F, no inertia) on the same
+terms; measured against this one in docs/walkers.md ("Which mechanics").
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ from .kernels import shell as kernels_shell
 from .kernels.contact import friction_kernel, gravity_kernel, ground_contact_kernel, limit_transpose_kernel
 from .kernels.dynamics import (
     first_moment_kernel,
+    overdamped_euler_kernel,
     rigid_correction_kernel,
     rigid_sums_kernel,
     speed_runaway_kernel,
@@ -149,6 +153,9 @@ class ShellDynamics:
         zeta = self._zeta(omega)
         return 2.0 / omega * (math.sqrt(1 + zeta**2) - zeta)
 
+    def _bound_formula(self) -> str:
+        return f"dt < 2/ω (√(1+ζ²) - ζ), ζ = {self._zeta(self.omega_max):.3g}"
+
     def set_time_step(self, dt, omega: float, check_dt: bool = True) -> None:
         """Take ω as the largest frequency (e.g. the largest over the active references a coupled
         run will visit), derive the bound, and set dt: None = `safety` × the bound; a fixed dt past
@@ -160,8 +167,8 @@ class ShellDynamics:
         elif positive("dt", dt) > self.stable_dt and check_dt:
             raise TimeStepError(
                 f"dt = {dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
-                f"(dt < 2/ω (√(1+ζ²) - ζ), ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos, "
-                f"ζ = {self._zeta(self.omega_max):.3g}): use dt <= {self.stable_dt:.6g}, e.g. "
+                f"({self._bound_formula()}, ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos): use dt <= "
+                f"{self.stable_dt:.6g}, e.g. "
                 f"dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), or dt=None"
             )  # fmt: skip
         if dt != self.dt:
@@ -212,7 +219,7 @@ class ShellDynamics:
 
     def _step(self) -> None:
         """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration)."""
-        n, s = len(self.mass), self.scalar
+        s = self.scalar
         self.shell.forces_device(self.x, self._forces)
         wp.launch(rigid_sums_kernel, dim=self._reduction_threads,
                   inputs=[self._forces, self._mass, self.x, self.v, int(self.damping > 0)],
@@ -220,7 +227,11 @@ class ShellDynamics:
         wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment, s(1.0 / self.total_mass)],
                   outputs=[self._rigid])  # fmt: skip
         self._contact_forces()
-        wp.launch(symplectic_euler_kernel, dim=n,
+        self._integrate()
+
+    def _integrate(self) -> None:
+        s = self.scalar
+        wp.launch(symplectic_euler_kernel, dim=len(self.mass),
                   inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.gravity), s(self.dt)],
                   outputs=[self.x, self.v])  # fmt: skip
 
@@ -308,3 +319,55 @@ class ShellDynamics:
             return np.zeros(len(self.mass))
         self.external_forces()
         return self._normal_force.numpy().astype(np.float64)
+
+
+class OverdampedDynamics(ShellDynamics):
+    """The overdamped mobility model (SPEC §3's alternative; the paper's "overdamped dynamics"):
+
+        ζ M_I v_I = F_I(x) - M_I g ẑ + (Lᵀ f_ground(L x, L v⁻))_I,     x ← x + dt v
+
+    drag ζ per unit mass against the lab frame, no inertia: every control point moves at the
+    velocity its net force gives it. The ground's damping and friction need a velocity; they see the
+    last step's v⁻ = (x_n - x_(n-1))/dt (explicit, lagged). Summing over the points, the internal
+    forces drop out: the centre of mass moves at (net external force)/(ζ ΣM) exactly, so on the
+    ground only friction can move it, at most μ g/ζ (docs/walkers.md, "Which mechanics").
+
+    Stability: explicit Euler on the gradient flow needs dt < 2ζ/ω² (ω² = λ_max(M⁻¹H), as for
+    `ShellDynamics`); the lagged contact damping feeds back with gain η_ground/ζ (η_ground = β max_J
+    (Lᵀ1)_J / M_J), so ζ must exceed η_ground (ValueError otherwise). drag=None picks 2 η_ground
+    (gain ½), the least drag that keeps the lag well damped (no ground: give ζ). Other arguments as
+    `ShellDynamics` (no `damping`: the drag damps every motion).
+    """
+
+    scheme = "overdamped (mobility) shell dynamics"
+
+    def __init__(self, shell: Shell, *, density, drag=None, **options):
+        if "damping" in options:
+            raise ValueError("OverdampedDynamics has no background damping: its drag ζ damps every motion")
+        self.drag = None if drag is None else positive("drag", drag)
+        super().__init__(shell, density=density, **options)
+
+    def _contact_damping(self) -> float:
+        eta = super()._contact_damping()
+        if self.drag is None:
+            if eta == 0:
+                raise ValueError("drag=None picks 2 η_ground, and there is no ground: give the drag ζ (> 0)")
+            self.drag = 2.0 * eta
+        elif self.drag <= eta:
+            raise ValueError(
+                f"drag ζ = {self.drag:.6g} does not exceed the ground's damping per unit mass η_ground = {eta:.6g}: the "
+                f"lagged contact velocity would oscillate and grow; use drag > {eta:.6g}, e.g. {2 * eta:.6g} (or None)"
+            )  # fmt: skip
+        return eta
+
+    def _bound(self, omega: float) -> float:
+        return 2.0 * self.drag / omega**2
+
+    def _bound_formula(self) -> str:
+        return f"dt < 2ζ/ω², ζ = {self.drag:.6g}"
+
+    def _integrate(self) -> None:
+        s = self.scalar
+        wp.launch(overdamped_euler_kernel, dim=len(self.mass),
+                  inputs=[self._forces, self._inverse_mass, self._rigid, s(1.0 / self.drag), s(self.gravity), s(self.dt)],
+                  outputs=[self.x, self.v])  # fmt: skip

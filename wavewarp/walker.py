@@ -16,7 +16,7 @@ import numpy as np
 import warp as wp
 
 from .coupled import Walking
-from .dynamics import Ground, ShellDynamics
+from .dynamics import Ground, OverdampedDynamics, ShellDynamics
 from .geometry import limit_positions
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh
@@ -41,7 +41,11 @@ WALKER_PARAMETERS = {
     "friction": Param(0.1, "friction coefficient μ (SPEC §4)", minimum=0.0),
     "sharpness": Param(0.1, "friction regularisation k_f (SPEC §4)", minimum=0.0),
     "damping": Param(0.2, "background damping η of the vibrations relative to the rigid-body motion (ours; no "
-                     "net force or torque): they decay in 1/η = 5 ≪ T ≈ 276", minimum=0.0),  # fmt: skip
+                     "net force or torque): they decay in 1/η = 5 ≪ T ≈ 276 (inertial mechanics)", minimum=0.0),  # fmt: skip
+    "mechanics": Param("inertial", "inertial: symplectic Euler with lumped mass (chosen by measurement, docs/walkers.md); "
+                       "overdamped: the mobility model ζ M v = F (no inertia)", choices=("inertial", "overdamped")),  # fmt: skip
+    "drag": Param(0.0, "overdamped mechanics: drag ζ per unit mass against the lab frame; 0 = 2 η_ground, the least "
+                  "that keeps the lagged contact damping stable with gain 1/2", minimum=0.0),  # fmt: skip
     "dt": Param(0.5, "chemistry step (explicit FHN; bound ≈ 1.7): the kinetic period is within 0.2% of its "
                 "dt → 0 value", positive=True),  # fmt: skip
     # SPEC §5; BENCHMARKS.md "Accuracy": two corrections carry the FHN front at level 4 (10.5% slow), lumped pins it
@@ -108,8 +112,11 @@ class WalkerRun(WaveClock):
                            rule=rule, device=device, dtype=dtype)  # fmt: skip
         ground = Ground(stiffness=p["stiffness"], damping=p["contact_damping"], friction=p["friction"],
                         sharpness=p["sharpness"])  # fmt: skip
-        self.dynamics = ShellDynamics(self.shell, density=p["density"], gravity=p["gravity"], ground=ground,
-                                      damping=p["damping"], safety=p["safety"])  # fmt: skip
+        common = dict(density=p["density"], gravity=p["gravity"], ground=ground, safety=p["safety"])
+        if p["mechanics"] == "overdamped":
+            self.dynamics = OverdampedDynamics(self.shell, drag=p["drag"] or None, **common)
+        else:
+            self.dynamics = ShellDynamics(self.shell, damping=p["damping"], **common)
         self.period_kinetic = fhn_kinetic_period(p["nu"], p["kappa"], p["epsilon"])
         self._bound_over_reference_range()
         self.dynamics.run_until(p["settle"])
@@ -131,6 +138,7 @@ class WalkerRun(WaveClock):
         self.coupled = Walking(self.dynamics, self.wave, sensitive=p["sensitive"], recorder=self._record_trace_row)
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
         self.resolved = {**p, "width": width, "mechanics_dt": self.dynamics.dt, "substeps": self.coupled.substeps,
+                         "drag": getattr(self.dynamics, "drag", 0.0),
                          "period_kinetic": self.period_kinetic}  # fmt: skip
         n = mesh.n_vertices
         self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
