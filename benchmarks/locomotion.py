@@ -1,6 +1,7 @@
 """Locomotion benchmark (issue 6; paper Fig. 3a): how fast the walkers walk, sensitive against insensitive.
 
     wavewarp bench locomotion --device cuda --out benchmarks/results [--quick] [--periods N] [--set NAME=VALUE]
+                              [--scenes sphere-walker prism-walker] [--twins both|sensitive|insensitive]
 
 Runs the sphere and prism walkers, each deformation-sensitive and -insensitive (the twin whose
 wave runs on the rest shell), over `--periods` FHN periods (default 6) at the scenes' defaults
@@ -53,14 +54,18 @@ def main(argv=None) -> int:
     parser.add_argument("--periods", type=float, default=None, help="run length in FHN periods (default 6; --quick 2.2)")
     parser.add_argument("--quick", action="store_true", help="coarse meshes over 2.2 periods (a CPU smoke run)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override for every run")
+    parser.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES), help="walkers to run (default both)")
+    parser.add_argument("--twins", choices=("both", "sensitive", "insensitive"), default="both",
+                        help="which of the twins to run (default both)")
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
     device = resolve_device(args.device)
     periods = args.periods or (2.2 if args.quick else 6.0)
     os.makedirs(args.out, exist_ok=True)
     runs, lines = [], []
-    for scene in SCENES:
-        for sensitive in (True, False):
+    twins = {"both": (True, False), "sensitive": (True,), "insensitive": (False,)}[args.twins]
+    for scene in args.scenes:
+        for sensitive in twins:
             overrides = (QUICK[scene] if args.quick else []) + args.set
             summary, run = run_walker(scene, sensitive, device=str(device), periods=periods, overrides=overrides)
             runs.append(summary)
@@ -69,7 +74,7 @@ def main(argv=None) -> int:
             print(f"{scene:14s} {'sensitive' if sensitive else 'insensitive':11s} T = {summary['period'] or float('nan'):7.2f}"
                   f"  speed = {speed if speed is not None else float('nan'):+.4f} R/T  distance = {summary['distance_R']:+.4f} R"
                   f"  ({summary['wall_time_s']:.1f} s)", flush=True)  # fmt: skip
-    for scene in SCENES:
+    for scene in args.scenes:
         pair = {r["sensitive"]: r["speed_R_per_T"] for r in runs if r["scene"] == scene}
         if pair.get(True) and pair.get(False) is not None:
             print(f"{scene}: insensitive / sensitive speed = {pair[False] / pair[True]:.3f}")

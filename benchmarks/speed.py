@@ -80,7 +80,7 @@ def walker_shell(level: int, device, dtype, deterministic=False, volume=True):
     without the volume penalty, the Koiter terms alone)."""
     mesh = icosphere(RADIUS, level)
     weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
-    touching, depth = ground_lift(mesh, weight, WALKER["stiffness"])
+    touching, depth = ground_lift(mesh, weight, walker_ground())
     mesh = Mesh(mesh.vertices + [0.0, 0.0, touching - depth], mesh.triangles)
     penalty = MU_V * WALKER["young"] * THICKNESS / RADIUS**4 if volume else 0.0
     shell = Shell(mesh, thickness=THICKNESS, young=WALKER["young"], poisson=WALKER["poisson"], AC=AC, AI=0.0,
@@ -88,11 +88,15 @@ def walker_shell(level: int, device, dtype, deterministic=False, volume=True):
     return mesh, shell
 
 
+def walker_ground() -> Ground:
+    """The walkers' default ground (SPEC §4, per limit point)."""
+    return Ground(stiffness=WALKER["stiffness"], damping=WALKER["contact_damping"], friction=WALKER["friction"],
+                  sharpness=WALKER["sharpness"])  # fmt: skip
+
+
 def dynamics_of(shell, omega=None):
     """The sphere walker's dynamics; `omega` (from an identical shell) skips the Lanczos estimate."""
-    ground = Ground(stiffness=WALKER["stiffness"], damping=WALKER["contact_damping"], friction=WALKER["friction"],
-                    sharpness=WALKER["sharpness"])  # fmt: skip
-    return ShellDynamics(shell, density=WALKER["density"], gravity=WALKER["gravity"], ground=ground,
+    return ShellDynamics(shell, density=WALKER["density"], gravity=WALKER["gravity"], ground=walker_ground(),
                          damping=WALKER["damping"], omega=omega)  # fmt: skip
 
 

@@ -3,6 +3,10 @@
 Gravity acts on the control points (exact: ∂/∂x_I of ρ g ∫ z dω̄⁰ is M_I g). Contact and
 friction act on the limit points p = L x with velocities u = L v (L the Loop limit mask) and
 reach the control points through Lᵀ, which does the same virtual work (f·u = (Lᵀf)·v).
+
+The per-area contact (`Ground(contact="area")`, ours: it converges under refinement) evaluates the
+same laws as pressures at the quadrature points of the limit surface, p_q = Σ N_I(q) x_I and
+u_q = Σ N_I(q) v_I, and spreads f_q dω̄⁰_q back with the same basis (virtual work again).
 """
 
 from typing import Any
@@ -10,6 +14,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
+from .limit_surface import basis_row
 
 
 @wp.kernel
@@ -69,9 +74,52 @@ def limit_transpose_kernel(
     forces[j] = forces[j] + s
 
 
+@wp.kernel
+def quadrature_motion_kernel(
+    x: wp.array(dtype=Any), v: wp.array(dtype=Any), patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32), triangle_type: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any),
+    points_per_triangle: int, p: wp.array(dtype=Any), u: wp.array(dtype=Any),
+):  # fmt: skip
+    """p_q = Σ N_I(q) x_I, u_q = Σ N_I(q) v_I: limit-surface points and velocities at quadrature point q
+    (positions summed relative to the patch's first vertex, as in `patch_jet`)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    start = patch_start[t]
+    origin = x[patch_vertices[start]]
+    position = origin - origin
+    velocity = position
+    for k in range(patch_start[t + 1] - start):
+        i = patch_vertices[start + k]
+        weight = basis[row, k][0]
+        position += weight * (x[i] - origin)
+        velocity += weight * v[i]
+    p[q] = position + origin
+    u[q] = velocity
+
+
+@wp.kernel
+def quadrature_spread_kernel(
+    pressure: wp.array(dtype=Any), area: wp.array(dtype=Any), patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32), triangle_type: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any),
+    points_per_triangle: int, forces: wp.array(dtype=Any),
+):  # fmt: skip
+    """forces_I += N_I(q) f_q dω̄⁰_q (atomic; only the few points touching the ground add anything)."""
+    q = wp.tid()
+    f = pressure[q] * area[q]
+    zero = area[q] - area[q]
+    if f[0] == zero and f[1] == zero and f[2] == zero:
+        return
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    start = patch_start[t]
+    for k in range(patch_start[t + 1] - start):
+        wp.atomic_add(forces, patch_vertices[start + k], basis[row, k][0] * f)
+
+
 declare_overloads(gravity_kernel, mass="scalar[]", g="scalar", forces="vec3[]")
 declare_overloads(ground_contact_kernel, p="vec3[]", u="vec3[]", k="scalar", beta="scalar", normal_force="scalar[]",
                   limit_forces="vec3[]")  # fmt: skip
 declare_overloads(friction_kernel, u="vec3[]", normal_force="scalar[]", mu="scalar", k_f="scalar", limit_forces="vec3[]")
 declare_overloads(limit_transpose_kernel, limit_forces="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]",
                   forces="vec3[]")  # fmt: skip
+declare_overloads(quadrature_motion_kernel, x="vec3[]", v="vec3[]", basis="vec6[,]", p="vec3[]", u="vec3[]")
+declare_overloads(quadrature_spread_kernel, pressure="vec3[]", area="scalar[]", basis="vec6[,]", forces="vec3[]")

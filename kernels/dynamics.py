@@ -111,6 +111,13 @@ def overdamped_euler_kernel(
 
 
 @wp.kernel
+def reference_ramp_kernel(start: wp.array(dtype=Any), end: wp.array(dtype=Any), fraction: Any, out: wp.array(dtype=Any)):
+    """out = start + fraction (end - start): the concentration the active reference follows within a chemistry step."""
+    i = wp.tid()
+    out[i] = start[i] + fraction * (end[i] - start[i])
+
+
+@wp.kernel
 def first_moment_kernel(mass: wp.array(dtype=Any), x: wp.array(dtype=Any), moment: wp.array(dtype=Any)):
     """moment[0] += Σ M_I x_I (zeroed by the caller; launched on whole blocks)."""
     i = wp.tid()
@@ -154,6 +161,7 @@ declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar
                   gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(overdamped_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]",
                   inverse_drag="scalar", gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+declare_overloads(reference_ramp_kernel, start="scalar[]", end="scalar[]", fraction="scalar", out="scalar[]")
 declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3[]")
 declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar",
                   trace="scalar[,]")  # fmt: skip

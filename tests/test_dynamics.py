@@ -251,3 +251,53 @@ def test_overdamped_refuses_a_drag_the_lagged_contact_cannot_follow():
         OverdampedDynamics(shell, density=1.0)
     with pytest.raises(ValueError, match="no background damping"):
         OverdampedDynamics(shell, density=1.0, drag=1.0, damping=0.1)
+
+
+# ---------------------------------------------------------------- per-area contact
+
+
+def test_area_contact_is_the_pressure_law_on_the_quadrature_points(device, rng):
+    """Ground(contact="area"): the SPEC §4 law as a pressure at the quadrature points, p_q and u_q
+    the limit surface's points at x and v (NumPy through `limit_surface`, linear in x), spread back
+    with the basis: the same total force Σ_q f_q dω̄⁰_q and the same virtual work Σ_q f_q·u_q dω̄⁰_q."""
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, thickness=0.1, young=100.0, device=device, dtype="float64")
+    ground = Ground(stiffness=500.0, damping=7.0, friction=0.3, sharpness=2.0, contact="area")
+    x = mesh.vertices + [0.0, 0.0, 0.9] + 0.02 * rng.standard_normal((mesh.n_vertices, 3))
+    v = rng.standard_normal((mesh.n_vertices, 3))
+    run = ShellDynamics(shell, density=2.0, ground=ground, x0=x, v0=v)
+    p, u = limit_surface(mesh, x, **F64).points, limit_surface(mesh, v, **F64).points
+    area = limit_surface(mesh, **F64).area  # dω̄⁰
+    z = p[:, 2]
+    pressure = np.where(z <= 0, np.maximum(ground.stiffness * z**2 - ground.damping * u[:, 2], 0.0), 0.0)
+    speed = np.linalg.norm(u[:, :2], axis=1)
+    traction = np.zeros_like(p)
+    traction[:, :2] = -(ground.friction * pressure * np.tanh(ground.sharpness * speed) / speed)[:, None] * u[:, :2]
+    traction[:, 2] = pressure
+    assert (pressure > 0).sum() >= 3 and ((z <= 0) & (pressure == 0)).any()  # some contacts, some pulled off
+    np.testing.assert_allclose(run.normal_forces(), pressure * area, rtol=1e-12, atol=1e-14)
+    forces = run.external_forces()
+    scale = np.abs(traction * area[:, None]).sum()
+    np.testing.assert_allclose(forces.sum(axis=0), (traction * area[:, None]).sum(axis=0), rtol=0, atol=1e-12 * scale)
+    work = np.sum(traction * u * area[:, None])
+    assert np.sum(forces * v) == pytest.approx(work, rel=1e-11)
+    assert run.contact_damping == pytest.approx(ground.damping / 2.0)  # β/ρ: max_J ∫ N_J dω̄⁰ / M_J = 1/ρ
+
+
+def test_area_contact_ball_settles_where_the_pressure_carries_its_weight():
+    """At rest Σ_q F_n = W; the height matches the rigid ball's root of Σ_q k min(z_q + s, 0)² dω̄⁰_q = W,
+    up to the elastic sag."""
+    mesh, g, k = icosphere(1.0, 2), 1.0, 1e5
+    surface = limit_surface(mesh, **F64)
+    z, area = surface.points[:, 2], surface.area
+    shell = Shell(mesh, thickness=0.1, young=1e6, device="cpu", dtype="float64")
+    lift = -limit_positions(mesh, **F64)[:, 2].min()
+    ground = Ground(stiffness=k, damping=300.0, friction=0.1, contact="area")
+    run = ShellDynamics(shell, density=1.0, gravity=g, ground=ground, damping=5.0, x0=mesh.vertices + [0.0, 0.0, lift])
+    run.run_until(20.0)
+    weight = run.total_mass * g
+    assert run.kinetic_energy() < 1e-9 * weight
+    assert run.normal_forces().sum() == pytest.approx(weight, rel=1e-4)
+    shift = brentq(lambda s: k * np.sum(area * np.minimum(z + s, 0.0) ** 2) - weight, lift - 0.5, lift)
+    rigid = shift + run.mass @ mesh.vertices[:, 2] / run.total_mass
+    assert 0 < rigid - run.center_of_mass()[2] < 0.05 * (lift - shift)

@@ -119,6 +119,29 @@ def test_overdamped_walker_moves_only_as_far_as_friction_can_drag_it():
     assert 0 < np.linalg.norm(moved) <= bound
 
 
+def test_area_contact_walker_carries_its_weight_with_the_spec_stiffness_per_vertex_area():
+    """`contact=area`: k and β per the mesh's mean rest area per control vertex (the point law's total
+    stiffness). The coarse prism bounces on its face (as with the point law), so the check is the
+    momentum balance: the contact pressure's mean over the run is W + ΔP_z / duration."""
+    run = walk("prism-walker", periods=0.01, frames=1, contact="area", settle=0)
+    dynamics = run.dynamics
+    area = dynamics.total_mass / run.p["density"]
+    assert run.resolved["contact_area"] == pytest.approx(area / run.mesh.n_vertices, rel=1e-12)
+    assert dynamics.ground.stiffness == pytest.approx(run.p["stiffness"] / run.resolved["contact_area"])
+    p0, times, loads = dynamics.momentum()[2], [], []
+    for k in range(201):
+        if k:
+            dynamics.run_until(dynamics.time + 0.5)
+        times.append(dynamics.time)
+        loads.append(dynamics.normal_forces().sum())
+    times, loads = np.array(times), np.array(loads)
+    duration = times[-1] - times[0]
+    mean = np.sum(0.5 * (loads[1:] + loads[:-1]) * np.diff(times)) / duration  # trapezoid rule
+    weight = dynamics.total_mass * run.p["gravity"]
+    assert max(loads) > 1.5 * weight  # it bounced
+    assert mean == pytest.approx(weight + (dynamics.momentum()[2] - p0) / duration, rel=0.02)
+
+
 def test_insensitive_twin_keeps_the_rest_surface():
     """`sensitive=false`: the wave's operator stays on the rest shell (its mass is the rest one),
     while the sensitive run's follows the shell (its mass moves off the rest one)."""
@@ -168,6 +191,11 @@ def test_bench_locomotion_quick_writes_json_and_chart(tmp_path):
         (s, b) for s in ("sphere-walker", "prism-walker") for b in (True, False)}  # fmt: skip
     assert all({"period", "speed_R_per_T"} <= set(r) for r in result["runs"]) and result["device"] == "cpu"
     assert (tmp_path / "locomotion.png").stat().st_size > 10_000
+    one = tmp_path / "one"
+    assert cli(["bench", "locomotion", "--quick", "--device", "cpu", "--out", str(one), "--periods", "0.1",
+                "--scenes", "prism-walker", "--twins", "insensitive", "--set", "contact=area"]) == 0  # fmt: skip
+    runs = json.loads((one / "locomotion.json").read_text())["runs"]
+    assert [(r["scene"], r["sensitive"], r["parameters"]["contact"]) for r in runs] == [("prism-walker", False, "area")]
 
 
 def test_walker_on_cuda_follows_the_cpu_run():
@@ -273,3 +301,32 @@ def test_walking_stops_a_wave_flip_flop_and_restores_the_chunk_start():
         assert np.array_equal(a.numpy(), b.numpy())
     assert run.wave.steps > 0 and run.dynamics.steps == run.wave.steps * run.substeps  # good chunks kept
     assert run.time == pytest.approx(twin.time, rel=1e-12)
+
+
+def test_reference_ramp_removes_the_kick_of_each_chemistry_step():
+    """A uniform c (K·1 = 0: FHN kinetics alone) contracts a free ball uniformly. Jumping the reference
+    to the new c at a chemistry step starts a breathing oscillation of the full step Δ; ramping it
+    over the step's substeps leaves 2|sin(ωτ/2)|/(ωτ) of it (a ramp-driven oscillator, τ = dt_c ≫ 1/ω
+    here), so far less kinetic energy. Both end on the same reference."""
+    from wavewarp.coupled import Walking
+    from wavewarp.dynamics import ShellDynamics
+    from wavewarp.laplace import LaplaceBeltrami
+    from wavewarp.mesh import icosphere
+    from wavewarp.shell import Shell
+    from wavewarp.waves import FitzHughNagumo
+
+    mesh = icosphere(1.0, 1)
+    c0 = np.full(mesh.n_vertices, 0.3)
+    runs = {}
+    for ramp in (False, True):
+        shell = Shell(mesh, thickness=0.1, young=5000.0, AC=0.3, device="cpu", dtype="float64")
+        at_rest = shell.relax(mesh.vertices, c0, tol=1e-10)  # in equilibrium with c0: only the step moves it
+        dynamics = ShellDynamics(shell, density=1.0, x0=at_rest, c=c0)
+        wave = FitzHughNagumo(LaplaceBeltrami(mesh, device="cpu", dtype="float64"), 0.2, c0=c0, dt=0.5)
+        runs[ramp] = Walking(dynamics, wave, sensitive=False, ramp=ramp).advance(1)
+    assert runs[True].substeps == runs[False].substeps >= 10
+    energy = {ramp: run.dynamics.kinetic_energy() for ramp, run in runs.items()}
+    assert energy[False] > 0 and energy[True] < 0.05 * energy[False]
+    for name in ("ref_metric", "ref_curvature", "ref_weight"):
+        a, b = (getattr(runs[ramp].shell, name).numpy() for ramp in (True, False))
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)

@@ -27,6 +27,7 @@ from .checks import count
 from .laplace import LaplaceBeltrami
 from .relax import relax
 from .device import run_steps
+from .kernels.dynamics import reference_ramp_kernel
 from .shell import RelaxationError, Shell
 from .waves import TimeStepError, _Stepper
 
@@ -111,10 +112,12 @@ class Walking:
     """Couple a `wave` (FitzHughNagumo or Telegraph) to inertial shell `dynamics` (the walkers, SPEC §3, §4).
 
     One coupled step, one chemistry step dt_c:
-    1. the wave advances one step;
-    2. the shell's active reference follows the new c (device to device);
-    3. the mechanics advance `substeps` steps of dt_c / substeps (the largest divisor step within
-       the mechanics' bound), so both clocks stay equal;
+    1. the wave advances one step, c⁰ → c¹;
+    2. the mechanics advance `substeps` steps of dt_c / substeps (the largest divisor step within
+       the mechanics' bound), so both clocks stay equal; before substep k the shell's active
+       reference follows c⁰ + (k/substeps)(c¹ - c⁰) (`ramp`, the default; device to device), or
+       jumps to c¹ before the first (`ramp=False`: each chemistry step then kicks the shell's stiffest
+       modes, docs/walkers.md "Reference ramp");
     4. deformation-sensitive runs move the wave's operator to the new positions; the insensitive
        twin keeps the rest surface (M and K fixed);
     5. `recorder()`, if given, launches device-only work (e.g. a trace row).
@@ -126,7 +129,8 @@ class Walking:
     (TimeStepError, state restored, if the fixed dt now exceeds it).
     """
 
-    def __init__(self, dynamics, wave: _Stepper, *, sensitive: bool = True, check_every: int = 20, recorder=None):
+    def __init__(self, dynamics, wave: _Stepper, *, sensitive: bool = True, check_every: int = 20, recorder=None,
+                 ramp: bool = True):  # fmt: skip
         from .dynamics import ShellDynamics
 
         if not isinstance(dynamics, ShellDynamics):
@@ -147,7 +151,9 @@ class Walking:
             raise ValueError("Walking needs a wave with a fixed dt (the mechanics step divides it)")
         self.substeps = math.ceil(wave.dt / dynamics.dt * (1 - 1e-12))
         dynamics.set_time_step(wave.dt / self.substeps, dynamics.omega_max)
+        self.ramp = bool(ramp) and self.substeps > 1  # one substep: the ramp's only value is c¹
         self.shell.update_reference(wave.c)
+        self._c_start, self._c_ramp = wp.empty_like(wave.c), wp.empty_like(wave.c)
         self._graphs = {}
         self._state = wave._state() + [dynamics.x, dynamics.v]
         self._backups = [wp.empty_like(a) for a in self._state]
@@ -157,9 +163,17 @@ class Walking:
         return self.wave.time
 
     def _step(self) -> None:
-        self.wave._step()
-        self.shell.update_reference(self.wave.c)
-        for _ in range(self.substeps):
+        if not self.ramp:
+            self.wave._step()
+            self.shell.update_reference(self.wave.c)
+        else:
+            wp.copy(self._c_start, self.wave.c)
+            self.wave._step()
+        for k in range(1, self.substeps + 1):
+            if self.ramp:
+                wp.launch(reference_ramp_kernel, dim=len(self._c_ramp), inputs=[self._c_start, self.wave.c,
+                          self.shell.scalar(k / self.substeps)], outputs=[self._c_ramp])  # fmt: skip
+                self.shell.update_reference(self._c_ramp)
             self.dynamics._step()
         if self.sensitive:
             self.operator.update(self.dynamics.x)

@@ -31,13 +31,20 @@ import warp as wp
 
 from .checks import count, finite, positive
 from .device import reduction_threads, run_steps
-from .geometry import LimitMask, checked_positions
+from .geometry import LimitMask, checked_positions, evaluate
 from .kernels import contact as kernels_contact
 from .kernels import dynamics as kernels_dynamics
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import reduce as kernels_reduce
 from .kernels import shell as kernels_shell
-from .kernels.contact import friction_kernel, gravity_kernel, ground_contact_kernel, limit_transpose_kernel
+from .kernels.contact import (
+    friction_kernel,
+    gravity_kernel,
+    ground_contact_kernel,
+    limit_transpose_kernel,
+    quadrature_motion_kernel,
+    quadrature_spread_kernel,
+)
 from .kernels.dynamics import (
     first_moment_kernel,
     overdamped_euler_kernel,
@@ -56,18 +63,26 @@ from .waves import BlowUpError, TimeStepError
 
 @dataclass(frozen=True)
 class Ground:
-    """The ground z = 0 (SPEC §4): F_n = max(k z² - β v_z, 0) where z ≤ 0, F_f = -μ F_n tanh(k_f |v_t|) v̂_t."""
+    """The ground z = 0 (SPEC §4): F_n = max(k z² - β v_z, 0) where z ≤ 0, F_f = -μ F_n tanh(k_f |v_t|) v̂_t.
+
+    contact "point" (SPEC §4): the law acts on each control vertex's limit point, k and β per point.
+    contact "area" (ours): the law is a pressure at the quadrature points of the limit surface,
+    k and β per unit rest area, so the load pattern converges under refinement (docs/walkers.md).
+    """
 
     stiffness: float = 10.0  # k
     damping: float = 0.5  # β
     friction: float = 0.1  # μ
     sharpness: float = 0.1  # k_f
+    contact: str = "point"
 
     def __post_init__(self):
         for name in ("stiffness", "damping", "friction", "sharpness"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"Ground.{name} must be a finite number >= 0, got {value!r}")
+        if self.contact not in ("point", "area"):
+            raise ValueError(f"Ground.contact must be 'point' or 'area', got {self.contact!r}")
 
 
 class ShellDynamics:
@@ -121,10 +136,14 @@ class ShellDynamics:
             self._second_moment = wp.zeros(1, dtype=wp.types.matrix((3, 3), self.scalar))
             self._rigid = wp.zeros(5, dtype=self.vec3)
             self._first_moment = wp.zeros(1, dtype=self.vec3)
-            self._limit_x = wp.zeros(n, dtype=self.vec3)
-            self._limit_v = wp.zeros(n, dtype=self.vec3)
-            self._limit_forces = wp.zeros(n, dtype=self.vec3)
-            self._normal_force = wp.zeros(n, dtype=self.scalar)
+            # the ground's points: limit points of the control vertices, or quadrature points (area contact)
+            points = n if ground is None or ground.contact == "point" else shell.tables.n_quadrature_points
+            self._limit_x = wp.zeros(points, dtype=self.vec3)
+            self._limit_v = wp.zeros(points, dtype=self.vec3)
+            self._limit_forces = wp.zeros(points, dtype=self.vec3)
+            self._normal_force = wp.zeros(points, dtype=self.scalar)
+            if points != n:
+                self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"]  # dω̄⁰ at each point
             self._flag = wp.zeros(1, dtype=wp.int32)
             self._backups = [wp.empty_like(self.x), wp.empty_like(self.v)]
         c = np.zeros(n) if c is None else shell.checked_concentrations(c)
@@ -138,9 +157,12 @@ class ShellDynamics:
 
     # ---------------------------------------------------------------- stability bound
     def _contact_damping(self) -> float:
-        """η_ground = β max_J (Lᵀ1)_J / M_J: the contact damping per unit mass (mesh only)."""
+        """η_ground = β max_J (Lᵀ1)_J / M_J: the contact damping per unit mass (mesh only); for the
+        area contact β max_J ∫ N_J dω̄⁰ / M_J = β/ρ."""
         if self.ground is None:
             return 0.0
+        if self.ground.contact == "area":
+            return self.ground.damping / self.density
         m = self.mask
         chi = np.repeat(m.ring_weight.numpy().astype(np.float64), np.diff(m.ring_start.numpy()))
         column_sums = m.centre_weight.numpy() + np.bincount(m.ring.numpy(), weights=chi, minlength=len(self.mass))
@@ -203,19 +225,28 @@ class ShellDynamics:
 
     # ---------------------------------------------------------------- stepping
     def _contact_forces(self) -> None:
-        """Contact and friction on the limit points, reaching the control points through Lᵀ."""
+        """Contact and friction on the limit points, reaching the control points through Lᵀ (or, for the
+        area contact, as pressures on the quadrature points, spread back with the basis)."""
         if self.ground is None:
             return
-        m, n, s, g = self.mask, len(self.mass), self.scalar, self.ground
-        wp.launch(limit_motion_kernel, dim=n, inputs=[self.x, self.v, m.ring_start, m.ring, m.centre_weight, m.ring_weight],
-                  outputs=[self._limit_x, self._limit_v])  # fmt: skip
+        m, n, s, g, t = self.mask, len(self._limit_x), self.scalar, self.ground, self.shell.tables
+        patch = [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
+        if g.contact == "point":
+            wp.launch(limit_motion_kernel, dim=n, inputs=[self.x, self.v, m.ring_start, m.ring, m.centre_weight,
+                                                          m.ring_weight], outputs=[self._limit_x, self._limit_v])  # fmt: skip
+        else:
+            wp.launch(quadrature_motion_kernel, dim=n, inputs=[self.x, self.v, *patch], outputs=[self._limit_x, self._limit_v])
         wp.launch(ground_contact_kernel, dim=n, inputs=[self._limit_x, self._limit_v, s(g.stiffness), s(g.damping)],
                   outputs=[self._normal_force, self._limit_forces])  # fmt: skip
         if g.friction > 0:
             wp.launch(friction_kernel, dim=n, inputs=[self._limit_v, self._normal_force, s(g.friction), s(g.sharpness)],
                       outputs=[self._limit_forces])  # fmt: skip
-        wp.launch(limit_transpose_kernel, dim=n, inputs=[self._limit_forces, m.ring_start, m.ring, m.centre_weight,
-                                                         m.ring_weight], outputs=[self._forces])  # fmt: skip
+        if g.contact == "point":
+            wp.launch(limit_transpose_kernel, dim=n, inputs=[self._limit_forces, m.ring_start, m.ring, m.centre_weight,
+                                                             m.ring_weight], outputs=[self._forces])  # fmt: skip
+        else:
+            wp.launch(quadrature_spread_kernel, dim=n, inputs=[self._limit_forces, self._rest_area, *patch],
+                      outputs=[self._forces])  # fmt: skip
 
     def _step(self) -> None:
         """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration)."""
@@ -314,11 +345,13 @@ class ShellDynamics:
         return self._forces.numpy().astype(np.float64)
 
     def normal_forces(self) -> np.ndarray:
-        """(V,) ground normal force on each limit point at the current state."""
+        """Ground normal force on each of the ground's points at the current state: (V,) on the limit
+        points, or (Q,) on the quadrature points for the area contact (pressure × dω̄⁰)."""
         if self.ground is None:
             return np.zeros(len(self.mass))
         self.external_forces()
-        return self._normal_force.numpy().astype(np.float64)
+        force = self._normal_force.numpy().astype(np.float64)
+        return force if self.ground.contact == "point" else force * self._rest_area.numpy()
 
 
 class OverdampedDynamics(ShellDynamics):

@@ -38,6 +38,11 @@ WALKER_PARAMETERS = {
     "gravity": Param(0.5, "g (SPEC §4)", minimum=0.0),
     "stiffness": Param(10.0, "ground contact k (SPEC §4)", minimum=0.0),
     "contact_damping": Param(0.5, "ground contact damping β (SPEC §4)", minimum=0.0),
+    "contact": Param("point", "point: k and β per limit point of a control vertex (SPEC §4); area (ours): a pressure "
+                     "k/a z² - β/a v_z on the limit surface, which converges under refinement", choices=("point", "area")),  # fmt: skip
+    "contact_area": Param(0.0, "area contact: the area a per limit point of the SPEC's k and β; 0 = this mesh's mean rest "
+                          "area per control vertex (the same total stiffness as the point law); fix it to compare meshes",
+                          minimum=0.0),  # fmt: skip
     "friction": Param(0.1, "friction coefficient μ (SPEC §4)", minimum=0.0),
     "sharpness": Param(0.1, "friction regularisation k_f (SPEC §4)", minimum=0.0),
     "damping": Param(0.2, "background damping η of the vibrations relative to the rigid-body motion (ours; no "
@@ -51,6 +56,8 @@ WALKER_PARAMETERS = {
     # SPEC §5; BENCHMARKS.md "Accuracy": two corrections carry the FHN front at level 4 (10.5% slow), lumped pins it
     "mass_corrections": Param(2, "FHN diffusion: p Richardson steps from the lumped mass (0) towards the consistent "
                               "one", minimum=0),  # fmt: skip
+    "ramp": Param(True, "the active reference follows c linearly over each chemistry step's mechanics substeps; "
+                  "false: it jumps at each step, which kicks the stiffest modes (docs/walkers.md)"),
     "safety": Param(0.9, "mechanics step = dt / n, the largest within safety × its stability bound", positive=True),
     "settle": Param(40.0, "time on the ground before the wave starts, c = 0 (the drop's bounce decays)", minimum=0.0),
     "periods": Param(4.0, "run length in periods T₀ of the FHN kinetics (SPEC values: T₀ = 275.8)", positive=True),
@@ -66,18 +73,29 @@ def walker_parameters(**scene) -> dict:
     return {**WALKER_PARAMETERS, **scene}
 
 
-def ground_lift(mesh: Mesh, weight: float, stiffness: float) -> tuple:
+def ground_lift(mesh: Mesh, weight: float, ground: Ground) -> tuple:
     """(lift, depth): adding `lift` to z makes the mesh's lowest limit point touch the ground z = 0;
-    `depth` is how deep a rigid body of `weight` sinks into the contact (Σ k max(-z_i, 0)² =
-    weight over the limit points). The walkers start at lift - depth: little is left to settle."""
+    `depth` is how deep a rigid body of `weight` sinks into the contact (Σ k max(-z_i, 0)² = weight
+    over the limit points, or Σ_q k max(-z_q, 0)² dω̄⁰_q over the quadrature points for the area
+    contact). The walkers start at lift - depth: little is left to settle."""
     from scipy.optimize import brentq
 
+    from .geometry import limit_surface
+
     z = limit_positions(mesh, device="cpu", dtype="float64")[:, 2]
-    height = z - z.min()
+    lift = -z.min()
+    weights = np.ones_like(z)
+    if ground.contact == "area":
+        surface = limit_surface(mesh, device="cpu", dtype="float64")
+        z, weights = surface.points[:, 2], surface.area
+    height = z + lift
     depth = 0.0
-    if weight > 0 and stiffness > 0:
-        depth = brentq(lambda d: stiffness * np.sum(np.maximum(d - height, 0.0) ** 2) - weight, 0.0, height.max())
-    return float(-z.min()), float(depth)
+    if weight > 0 and ground.stiffness > 0:
+        def excess(d):
+            return ground.stiffness * np.sum(weights * np.maximum(d - height, 0.0) ** 2) - weight
+
+        depth = brentq(excess, 0.0, height.max())
+    return float(lift), float(depth)
 
 
 def nearest_vertex(mesh: Mesh, point) -> int:
@@ -98,8 +116,14 @@ class WalkerRun(WaveClock):
                  rule: str = "3", device=None):  # fmt: skip
         from .geometry import limit_surface
 
-        weight = p["density"] * p["gravity"] * limit_surface(mesh, device="cpu", dtype="float64").area.sum()
-        touching, depth = ground_lift(mesh, weight, p["stiffness"])
+        area = limit_surface(mesh, device="cpu", dtype="float64").area.sum()
+        weight = p["density"] * p["gravity"] * area
+        per = 1.0
+        if p["contact"] == "area":  # the SPEC's k and β per point, spread over the area a of one
+            per = p["contact_area"] or area / mesh.n_vertices
+        ground = Ground(stiffness=p["stiffness"] / per, damping=p["contact_damping"] / per, friction=p["friction"],
+                        sharpness=p["sharpness"], contact=p["contact"])  # fmt: skip
+        touching, depth = ground_lift(mesh, weight, ground)
         lift = np.array([0.0, 0.0, touching - depth])
         mesh = Mesh(mesh.vertices + lift, mesh.triangles)
         self.name, self.mesh, self.p, self.radius = name, mesh, p, radius
@@ -110,8 +134,6 @@ class WalkerRun(WaveClock):
         self.shell = Shell(mesh, thickness=p["thickness"], young=p["young"], poisson=p["poisson"], AC=p["AC"],
                            AI=p["AI"], volume_penalty=p["mu_v"] * p["young"] * p["thickness"] / size**4, model=model,
                            rule=rule, device=device, dtype=dtype)  # fmt: skip
-        ground = Ground(stiffness=p["stiffness"], damping=p["contact_damping"], friction=p["friction"],
-                        sharpness=p["sharpness"])  # fmt: skip
         common = dict(density=p["density"], gravity=p["gravity"], ground=ground, safety=p["safety"])
         if p["mechanics"] == "overdamped":
             self.dynamics = OverdampedDynamics(self.shell, drag=p["drag"] or None, **common)
@@ -135,10 +157,11 @@ class WalkerRun(WaveClock):
         with wp.ScopedDevice(self.shell.device):
             self._trace_row = wp.zeros(1, dtype=wp.int32)
             self._trace_rows = wp.zeros((self.steps_per_frame, TRACE_COLUMNS - 1), dtype=self.shell.scalar)
-        self.coupled = Walking(self.dynamics, self.wave, sensitive=p["sensitive"], recorder=self._record_trace_row)
+        self.coupled = Walking(self.dynamics, self.wave, sensitive=p["sensitive"], recorder=self._record_trace_row,
+                               ramp=p["ramp"])  # fmt: skip
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
         self.resolved = {**p, "width": width, "mechanics_dt": self.dynamics.dt, "substeps": self.coupled.substeps,
-                         "drag": getattr(self.dynamics, "drag", 0.0),
+                         "drag": getattr(self.dynamics, "drag", 0.0), "contact_area": per if p["contact"] == "area" else 0.0,
                          "period_kinetic": self.period_kinetic}  # fmt: skip
         n = mesh.n_vertices
         self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
