@@ -389,7 +389,7 @@ class OverdampedDynamics(ShellDynamics):
         elif self.drag <= eta:
             raise ValueError(
                 f"drag ζ = {self.drag:.6g} does not exceed the ground's damping per unit mass η_ground = {eta:.6g}: the "
-                f"lagged contact velocity would oscillate and grow; use drag > {eta:.6g}, e.g. {2 * eta:.6g} (or None)"
+                f"lagged contact velocity would oscillate and grow; use drag > {eta:.6g}, e.g. {2 * eta:.6g} (drag=None, in a scene --set drag=0, picks that)"
             )  # fmt: skip
         return eta
 
