@@ -366,8 +366,8 @@ class OverdampedDynamics(ShellDynamics):
     ground only friction can move it, at most μ g/ζ (docs/walkers.md, "Which mechanics").
 
     Stability: explicit Euler on the gradient flow needs dt < 2ζ/ω² (ω² = λ_max(M⁻¹H), as for
-    `ShellDynamics`); the lagged contact damping feeds back with gain η_ground/ζ (η_ground = β max_J
-    (Lᵀ1)_J / M_J), so ζ must exceed η_ground (ValueError otherwise). drag=None picks 2 η_ground
+    `ShellDynamics`); the lagged contact damping feeds back with gain η_ground/ζ (η_ground, the
+    contact damping per unit mass of `_contact_damping`), so ζ must exceed η_ground (ValueError otherwise). drag=None picks 2 η_ground
     (gain ½), the least drag that keeps the lag well damped (no ground: give ζ). Other arguments as
     `ShellDynamics` (no `damping`: the drag damps every motion).
     """
@@ -389,7 +389,8 @@ class OverdampedDynamics(ShellDynamics):
         elif self.drag <= eta:
             raise ValueError(
                 f"drag ζ = {self.drag:.6g} does not exceed the ground's damping per unit mass η_ground = {eta:.6g}: the "
-                f"lagged contact velocity would oscillate and grow; use drag > {eta:.6g}, e.g. {2 * eta:.6g} (drag=None, in a scene --set drag=0, picks that)"
+                f"lagged contact velocity would oscillate and grow; use drag > {eta:.6g}, e.g. {2 * eta:.6g} "
+                f"(drag=None, in a scene --set drag=0, picks that)"
             )  # fmt: skip
         return eta
 
