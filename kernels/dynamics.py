@@ -58,6 +58,16 @@ def rigid_correction_kernel(
     second_moment[0] = type(S)()
 
 
+@wp.func
+def specific_force(force: Any, inverse_mass: Any, rigid: wp.array(dtype=Any), r: Any, gravity: Any):
+    """F/M - g ẑ - a_rigid at a point r = x - c from the centre: a_rigid = N/ΣM + α × r undoes the net
+    force and torque of the internal forces' round-off (zero in exact arithmetic; in float32 they
+    would set a resting shell rolling)."""
+    accel = inverse_mass * force - rigid[0] - wp.cross(rigid[1], r)
+    accel[2] = accel[2] - gravity
+    return accel
+
+
 @wp.kernel
 def symplectic_euler_kernel(
     forces: wp.array(dtype=Any),
@@ -71,16 +81,13 @@ def symplectic_euler_kernel(
 ):
     """v += dt (F/M - g ẑ - a_rigid - η (v - v_rigid)), then x += dt v.
 
-    Gravity M_I g on every control point is the uniform acceleration g. a_rigid = N/ΣM + α × (x - c)
-    undoes the net force and torque of the internal forces' round-off (zero in exact arithmetic; in
-    float32 they would set a resting shell rolling); the damping acts on the velocity relative to the
-    rigid-body motion v_rigid = v̄ + Ω × (x - c), so it exerts no net force and no torque (it keeps P
-    and L, and lets a shell roll and slide freely).
+    Gravity M_I g on every control point is the uniform acceleration g (`specific_force`); the damping
+    acts on the velocity relative to the rigid-body motion v_rigid = v̄ + Ω × (x - c), so it exerts
+    no net force and no torque (it keeps P and L, and lets a shell roll and slide freely).
     """
     i = wp.tid()
     r = x[i] - rigid[2]
-    accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], r)
-    accel[2] = accel[2] - gravity
+    accel = specific_force(forces[i], inverse_mass[i], rigid, r, gravity)
     vi = v[i] + dt * (accel - damping * (v[i] - rigid[3] - wp.cross(rigid[4], r)))
     v[i] = vi
     x[i] = x[i] + dt * vi
@@ -97,15 +104,10 @@ def overdamped_euler_kernel(
     x: wp.array(dtype=Any),
     v: wp.array(dtype=Any),
 ):
-    """Mobility model: v = (F/M - g ẑ - a_rigid) / ζ, then x += dt v (v is what the ground sees next step).
-
-    ζ is the drag per unit mass against the lab frame; a_rigid removes the internal forces'
-    round-off net force and torque as in `symplectic_euler_kernel`.
-    """
+    """Mobility model: v = (F/M - g ẑ - a_rigid) / ζ (`specific_force`), then x += dt v (v is what the
+    ground sees next step); ζ is the drag per unit mass against the lab frame."""
     i = wp.tid()
-    accel = inverse_mass[i] * forces[i] - rigid[0] - wp.cross(rigid[1], x[i] - rigid[2])
-    accel[2] = accel[2] - gravity
-    vi = inverse_drag * accel
+    vi = inverse_drag * specific_force(forces[i], inverse_mass[i], rigid, x[i] - rigid[2], gravity)
     v[i] = vi
     x[i] = x[i] + dt * vi
 

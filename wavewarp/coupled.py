@@ -163,12 +163,11 @@ class Walking:
         return self.wave.time
 
     def _step(self) -> None:
-        if not self.ramp:
-            self.wave._step()
-            self.shell.update_reference(self.wave.c)
-        else:
+        if self.ramp:
             wp.copy(self._c_start, self.wave.c)
-            self.wave._step()
+        self.wave._step()
+        if not self.ramp:
+            self.shell.update_reference(self.wave.c)
         for k in range(1, self.substeps + 1):
             if self.ramp:
                 wp.launch(reference_ramp_kernel, dim=len(self._c_ramp), inputs=[self._c_start, self.wave.c,
