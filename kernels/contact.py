@@ -14,7 +14,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .limit_surface import basis_row
+from .limit_surface import basis_row, patch_scalar
 
 
 @wp.kernel
@@ -80,21 +80,11 @@ def quadrature_motion_kernel(
     patch_vertices: wp.array(dtype=wp.int32), triangle_type: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any),
     points_per_triangle: int, p: wp.array(dtype=Any), u: wp.array(dtype=Any),
 ):  # fmt: skip
-    """p_q = Σ N_I(q) x_I, u_q = Σ N_I(q) v_I: limit-surface points and velocities at quadrature point q
-    (positions summed relative to the patch's first vertex, as in `patch_jet`)."""
+    """p_q = Σ N_I(q) x_I, u_q = Σ N_I(q) v_I: limit-surface points and velocities at quadrature point q."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    start = patch_start[t]
-    origin = x[patch_vertices[start]]
-    position = origin - origin
-    velocity = position
-    for k in range(patch_start[t + 1] - start):
-        i = patch_vertices[start + k]
-        weight = basis[row, k][0]
-        position += weight * (x[i] - origin)
-        velocity += weight * v[i]
-    p[q] = position + origin
-    u[q] = velocity
+    p[q] = patch_scalar(x, patch_start, patch_vertices, basis, t, row)
+    u[q] = patch_scalar(v, patch_start, patch_vertices, basis, t, row)
 
 
 @wp.kernel

@@ -168,12 +168,42 @@ def patch_scalar(
     t: int,
     row: int,
 ):
-    """Σ N_k c_k of triangle t's patch at basis row `row` (a field on the surface, SPEC §2)."""
+    """Σ N_k c_k of triangle t's patch at basis row `row`: a field on the surface (SPEC §2), or with
+    vec3 values the surface's points alone."""
     start = patch_start[t]
     value = basis[row, 0][0] * c[patch_vertices[start]]
     for k in range(1, patch_start[t + 1] - start):
         value += basis[row, k][0] * c[patch_vertices[start + k]]
     return value
+
+
+@wp.func
+def entry_point(
+    entry: int,
+    point: int,
+    entry_triangle: wp.array(dtype=wp.int32),
+    patch_start: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+):
+    """For a vertex's `entry` in the patch table (deterministic gathers): the quadrature point q of
+    the entry's triangle at `point`, and the vertex's basis values there (N, N,1, …, N,22)."""
+    t = entry_triangle[entry]
+    q = t * points_per_triangle + point
+    return q, basis[triangle_type[t] * points_per_triangle + point, entry - patch_start[t]]
+
+
+@wp.kernel
+def quadrature_points_kernel(
+    x: wp.array(dtype=Any), patch_start: wp.array(dtype=wp.int32), patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any), points_per_triangle: int,
+    points: wp.array(dtype=Any),
+):  # fmt: skip
+    """points_q = Σ N_I(q) x_I: the limit surface at every quadrature point, values only."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    points[q] = patch_scalar(x, patch_start, patch_vertices, basis, t, row)
 
 
 _PATCH = dict(basis="vec6[,]")
@@ -187,3 +217,4 @@ declare_overloads(
 declare_overloads(
     limit_motion_kernel, x="vec3[]", v="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]", p="vec3[]", u="vec3[]"
 )  # fmt: skip
+declare_overloads(quadrature_points_kernel, x="vec3[]", points="vec3[]", **_PATCH)

@@ -16,10 +16,10 @@ from . import declare_overloads
 ENERGY, ALPHA, CANDIDATE, SLOPE, FS, BETA, RESIDUAL, BEST_RESIDUAL, TOL, MAX_ITERATIONS, FORCE_SCALE, NOISE = range(12)
 SEARCH_SIZE = 12
 # flags[...] (int32)
-ACCEPTED, PROBING, TRIES, ITERATION, STATUS, RESTART, MOVED, STALLED = range(8)
-FLAGS_SIZE = 8
-# flags[STATUS]
-RUNNING, CONVERGED, BUDGET_SPENT, NO_DESCENT = range(4)
+ACCEPTED, PROBING, TRIES, ITERATION, STATUS, RESTART, MOVED, STALLED, FAR_TRIAL, OUTSIDE_SKIN = range(10)
+FLAGS_SIZE = 10
+# flags[STATUS]; STALE: x left half the self-contact search's skin, the caller searches again and goes on
+RUNNING, CONVERGED, BUDGET_SPENT, NO_DESCENT, STALE = range(5)
 # sums[...] (the shell's scalar): F·s, F·(s − s_old), F·d, max |F|
 FS_SUM, FDS_SUM, FD_SUM, FMAX_SUM = range(4)
 
@@ -57,6 +57,8 @@ def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype
     flags[PROBING] = 1
     flags[STALLED] = 0
     flags[TRIES] = 0
+    flags[FAR_TRIAL] = 0
+    flags[OUTSIDE_SKIN] = 0
     flags[ITERATION] = 0
     flags[RESTART] = 0
     flags[MOVED] = 0
@@ -70,10 +72,11 @@ def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype
 def trial_kernel(x: wp.array(dtype=Any), direction: wp.array(dtype=Any), search: wp.array(dtype=wp.float64),
                  trial: wp.array(dtype=Any), dot: wp.array(dtype=Any), flags: wp.array(dtype=wp.int32)):  # fmt: skip
     """trial = x + α d at the candidate α; flags[MOVED] = 1 unless x + α d rounds to x everywhere
-    (zeroed by the line search); zeroes the slope accumulator."""
+    (zeroed by the line search); zeroes the slope accumulator and the trial's skin flag."""
     i = wp.tid()
     if i == 0:
         dot[0] = type(dot[0])(0.0)
+        flags[OUTSIDE_SKIN] = 0
     xi = x[i]
     ti = xi + type(xi[0])(search[CANDIDATE]) * direction[i]
     trial[i] = ti
@@ -98,11 +101,13 @@ def line_search_kernel(trial_energy: wp.array(dtype=wp.float64), dot: wp.array(d
     backtracking by halves. Accept under Armijo's condition, or, where the energy change is below
     round-off (float32 near equilibrium), when E stays within round-off and the slope flattens or
     still descends (negative curvature near a buckling instability). A step that rounds to x is
-    no step. After MAX_TRIES halvings the search has found no lower energy: the loop stops
-    (NO_DESCENT, the dtype's round-off floor).
+    no step, and so is one that leaves the self-contact search's skin (flags[FAR_TRIAL]). After
+    MAX_TRIES halvings the search has found no lower energy: the loop stops (NO_DESCENT, the
+    dtype's round-off floor).
     """
-    moved = flags[MOVED] == 1
+    moved = flags[MOVED] == 1 and flags[FAR_TRIAL] == 0
     flags[MOVED] = 0
+    flags[FAR_TRIAL] = 0
     e = trial_energy[0]
     slope_new = -wp.float64(dot[0])
     e0 = search[ENERGY]
@@ -187,8 +192,8 @@ def iteration_kernel(flags: wp.array(dtype=wp.int32), sums: wp.array(dtype=Any),
                      history: wp.array(dtype=wp.float64), condition: wp.array(dtype=wp.int32)):  # fmt: skip
     """Close an accepted iteration: restart along s if d does not descend; record E; stop when
     max |F| ≤ tol · Y h ℓ̄, when the iteration budget is spent, or when MAX_STALLED steps in a
-    row lowered neither E nor max |F| (steps within round-off that go nowhere: NO_DESCENT).
-    The next probe is at the last α."""
+    row lowered neither E nor max |F| (steps within round-off that go nowhere: NO_DESCENT), or
+    when x has left a quarter of the self-contact search's skin (STALE). The next probe is at the last α."""
     if flags[ACCEPTED] == 0:
         return
     fd = wp.float64(sums[FD_SUM])
@@ -217,6 +222,18 @@ def iteration_kernel(flags: wp.array(dtype=wp.int32), sums: wp.array(dtype=Any),
     elif flags[STALLED] >= MAX_STALLED:
         flags[STATUS] = NO_DESCENT
         condition[0] = 0
+    elif flags[OUTSIDE_SKIN] == 1:
+        flags[STATUS] = STALE
+        condition[0] = 0
+
+
+@wp.kernel
+def resume_kernel(flags: wp.array(dtype=wp.int32), condition: wp.array(dtype=wp.int32)):
+    """Go on after a STALE stop (a new self-contact search): the CG state is kept, since the old
+    candidates already held every pair within the contact distance."""
+    flags[STATUS] = RUNNING
+    flags[OUTSIDE_SKIN] = 0
+    condition[0] = 1
 
 
 @wp.kernel

@@ -15,7 +15,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .limit_surface import basis_row, first_form, patch_jet, patch_scalar, second_form
+from .limit_surface import basis_row, entry_point, first_form, patch_jet, patch_scalar, second_form
 from .reduce import block_add
 
 KOITER = wp.constant(0)
@@ -340,12 +340,9 @@ def gather_forces_kernel(
     if penalty > wp.float64(0.0):
         f = type(forces[i])(volume_centroid_force(moments, forces.shape[0], target, penalty))
     for e in range(vertex_entry_start[i], vertex_entry_start[i + 1]):
-        entry = vertex_entries[e]
-        t = entry_triangle[entry]
-        k = entry - patch_start[t]
         for point in range(points_per_triangle):
-            q = t * points_per_triangle + point
-            b = basis[triangle_type[t] * points_per_triangle + point, k]
+            q, b = entry_point(vertex_entries[e], point, entry_triangle, patch_start, triangle_type, basis,
+                               points_per_triangle)  # fmt: skip
             f -= b[0] * jets[q, 0] + b[1] * jets[q, 1] + b[2] * jets[q, 2]
             f -= b[3] * jets[q, 3] + b[4] * jets[q, 4] + b[5] * jets[q, 5]
     forces[i] = f

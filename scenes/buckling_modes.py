@@ -14,6 +14,8 @@ PARAMETERS = {
     "overdamped": Param(True, "buckling is an instability: near it a relaxation may not converge within its budget; "
                         "the paper's overdamped update lets the shell lag its reference there (counted in --json)"),
     "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
+    "self_contact": Param(True, "keep the layers apart where the everted cap meets the far side (ours; SPEC has none): "
+                          "contact distance h, docs/shell.md \"Self-contact\""),  # fmt: skip
     "noise": Param(1e-4, "rest-shape imperfection / R: breaks the symmetry so the n-fold mode can form",
                    minimum=0.0),
     "k": Param(1.0, "front steepness k (1/length): the front is ~2/k = 2 length units wide, as the oocyte pulse",

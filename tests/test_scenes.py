@@ -37,6 +37,8 @@ def test_quick_run_writes_usd_and_hdf5(scene, device, tmp_path, capsys):
     assert code == 0, err
     summary = json.loads(out)
     assert summary["scene"] == scene and summary["outputs"][:2] == [str(usd), str(h5)] and summary["steps"] > 0
+    # the buckling scenes build the self-contact term (their everted caps meet the far side), the others do not
+    assert ("self_contact_searches" in summary) == scene.startswith("buckling")
     assert all(os.path.isfile(path) for path in summary["outputs"])  # the figures too
     stage = Usd.Stage.Open(str(usd))
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
@@ -105,6 +107,7 @@ def test_uniform_concentration_through_the_cli_reaches_the_closed_form_radius(tm
         (["ascidian", "--out", "/nonexistent/dir/a.usda"], "does not exist"),
         (["ascidian", "--out", "a.txt"], "must end in .usd"),
         (["ascidian", "--resume"], "--resume needs --h5"),
+        (["buckling", "--set", "level=2"], "or --set self_contact=false"),  # too coarse for self-contact
     ],
 )
 def test_bad_input_exits_with_one_line_and_writes_nothing(args, message, tmp_path, capsys, monkeypatch):
@@ -150,6 +153,7 @@ def test_interrupt_or_solver_failure_keeps_the_frames_written(stop, code, tmp_pa
     with h5py.File(h5, "r") as f:
         assert len(f["frames/time"]) == 2  # the initial frame and the one completed
     assert usd.exists() and not [p for p in os.listdir(tmp_path) if p.startswith(".")]  # no temporary left
+    assert [p for p in os.listdir(tmp_path) if p.endswith(".png")]  # the kept frames' figures
     if stop != KeyboardInterrupt:
         assert "; kept the 2 frames before it" in err
 

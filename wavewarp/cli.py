@@ -162,20 +162,20 @@ def _scene_run(args) -> int:
         interrupted = True
     finally:
         progress.close()
-    if failure:
-        print(f"wavewarp run {module.NAME}: {failure}; kept the {usd.frames} frames before it", file=sys.stderr)
-        return 1
     outputs = [out] + [p for p in (args.h5, args.xdmf) if p]
-    if usd.frames > 1:
+    if usd.frames > 1:  # the figures of the frames kept, also when the run stopped early
         outputs += run.figures(os.path.splitext(out)[0])
     summary = {
         "scene": module.NAME, "device": str(run.shell.device), "steps": run.steps, "frames": usd.frames,
         "wall_time_s": time.perf_counter() - start, "outputs": outputs, "interrupted": interrupted,
-        **(run.measurements() if interrupted else measured),
+        "stopped": failure, **(run.measurements() if interrupted else measured),
     }  # fmt: skip
     if args.json:
         print(json.dumps(summary))
-    else:
+    if failure:
+        print(f"wavewarp run {module.NAME}: {failure}; kept the {usd.frames} frames before it", file=sys.stderr)
+        return 1
+    if not args.json:
         state = "interrupted; kept" if interrupted else "wrote"
         print(f"{state} {usd.frames} frames to {', '.join(outputs)} ({summary['wall_time_s']:.1f} s, {run.steps} wave steps)")
     return 130 if interrupted else 0

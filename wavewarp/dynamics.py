@@ -105,6 +105,9 @@ class ShellDynamics:
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         if ground is not None and not isinstance(ground, Ground):
             raise ValueError(f"ground must be a wavewarp.dynamics.Ground or None, got {type(ground).__name__}")
+        if shell.self_contact is not None:
+            raise ValueError("self-contact acts in quasi-static relaxations only (Shell.relax, QuasiStatic): the dynamics "
+                             "steppers do not search its pairs again; set shell.self_contact = None")  # fmt: skip
         self.shell, self.ground = shell, ground
         self.device, self.scalar, self.vec3, self._real = shell.device, shell.scalar, shell.vec3, shell._real
         self.density = positive("density", density)

@@ -11,17 +11,23 @@ import warp as wp
 
 from .device import run_steps
 from .kernels import reduce as kernels_reduce
+from .kernels import contact as kernels_contact
+from .kernels import limit_surface as kernels_limit_surface
 from .kernels import relax as kernels_relax
+from .kernels import self_contact as kernels_self_contact
 from .kernels import shell as kernels_shell
 from .kernels.relax import (
     ACCEPTED,
     BUDGET_SPENT,
     CONVERGED,
+    FAR_TRIAL,
     ENERGY,
     FLAGS_SIZE,
     ITERATION,
+    OUTSIDE_SKIN,
     RESIDUAL,
     SEARCH_SIZE,
+    STALE,
     STATUS,
     TOL,
     accept_kernel,
@@ -30,6 +36,7 @@ from .kernels.relax import (
     iteration_kernel,
     line_search_kernel,
     restart_kernel,
+    resume_kernel,
     slope_kernel,
     start_kernel,
     start_search_kernel,
@@ -75,32 +82,49 @@ class Relaxation:
             self.search = wp.zeros(SEARCH_SIZE, dtype=wp.float64)
             self.flags, self.condition = wp.zeros(FLAGS_SIZE, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
         self.history = None  # E after each accepted step, capacity max_iterations + 1
-        self._graphs = {}
+        self.forget_graphs()
         # autodiff forces allocate per evaluation (Tape): they run the same loop from the host
         self.capture = shell.gradient != "autodiff"
 
-    def run(self, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None):
+    def run(self, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None,
+            resume: bool = False):  # fmt: skip
         """Relax from x to max |F| <= tol · Y h ℓ̄; returns the positions (V, 3) in float64, or, with
-        `out` (a device array, may be x), writes them there and returns None."""
+        `out` (a device array, may be x), writes them there and returns None. `resume` goes on
+        from a STALE stop with the CG state, iteration count and budget as they were."""
         shell = self.shell
-        if self.history is None or len(self.history) < max_iterations + 1:
-            self.history = wp.zeros(max_iterations + 1, dtype=wp.float64, device=shell.device)
-            self._graphs = {}  # the captured loop writes the history array it was captured with
-        parameters = [tol, max_iterations, shell.force_scale(), ENERGY_NOISE[shell.scalar]]
-        self.search[TOL:].assign(np.array(parameters, dtype=np.float64))
-        wp.copy(self.x, x)
+        if not resume:
+            if self.history is None or len(self.history) < max_iterations + 1:
+                self.history = wp.zeros(max_iterations + 1, dtype=wp.float64, device=shell.device)
+                self.forget_graphs()  # the captured loop writes the history array it was captured with
+            parameters = [tol, max_iterations, shell.force_scale(), ENERGY_NOISE[shell.scalar]]
+            self.search[TOL:].assign(np.array(parameters, dtype=np.float64))
+            wp.copy(self.x, x)
+        solve, graphs = (self._resume, self._resume_graphs) if resume else (self._solve, self._graphs)
         if callback is not None:
             with wp.ScopedDevice(shell.device):
-                self._start()
-                self._loop(callback)
+                if resume:
+                    wp.launch(resume_kernel, dim=1, outputs=[self.flags, self.condition])
+                else:
+                    self._start()
+                self._loop(callback, announce=not resume)
         else:
-            run_steps(self._solve, 1, device=shell.device, graphs=self._graphs,
-                      modules=(kernels_relax, kernels_shell, kernels_reduce), capture=self.capture)  # fmt: skip
+            modules = (kernels_relax, kernels_shell, kernels_reduce)
+            if shell.self_contact is not None:
+                modules += (kernels_self_contact, kernels_limit_surface, kernels_contact)
+            run_steps(solve, 1, device=shell.device, graphs=graphs, modules=modules, capture=self.capture)
         return self._result(tol, out)
+
+    def forget_graphs(self) -> None:
+        """Drop the captured loops (they hold the arrays and terms they were captured with)."""
+        self._graphs, self._resume_graphs = {}, {}
 
     def _solve(self) -> None:
         """The whole relaxation: the start, then passes while the line search and the checks go on."""
         self._start()
+        wp.capture_while(self.condition, self._pass)
+
+    def _resume(self) -> None:
+        wp.launch(resume_kernel, dim=1, outputs=[self.flags, self.condition])
         wp.capture_while(self.condition, self._pass)
 
     def _start(self) -> None:
@@ -114,8 +138,11 @@ class Relaxation:
     def _pass(self) -> None:
         """Evaluate x + α d, let the line search decide, and after an accepted step update d."""
         shell, n = self.shell, self.shell.mesh.n_vertices
+        contact = shell.self_contact
         wp.launch(trial_kernel, dim=n, inputs=[self.x, self.direction, self.search], outputs=[self.trial, self.dot, self.flags])
         shell.forces_device(self.trial, self.trial_forces, self.trial_energy)
+        if contact is not None:  # a trial half the skin away is refused; once a quarter away, a new search
+            contact.mark_moved(self.flags, FAR_TRIAL, OUTSIDE_SKIN)
         wp.launch(slope_kernel, dim=n, inputs=[self.trial_forces, self.direction], outputs=[self.dot])
         wp.launch(line_search_kernel, dim=1, inputs=[self.trial_energy, self.dot],
                   outputs=[self.search, self.flags, self.condition])  # fmt: skip
@@ -129,9 +156,9 @@ class Relaxation:
                   outputs=[self.history, self.condition])  # fmt: skip
         wp.launch(restart_kernel, dim=n, inputs=[self.flags, self.s], outputs=[self.direction])
 
-    def _loop(self, callback) -> None:
+    def _loop(self, callback, announce: bool = True) -> None:
         """The loop driven from the host: callback(iteration, E, residual) at the start and after each step."""
-        if callback is not None:
+        if announce:
             search = self.search.numpy()
             callback(0, search[ENERGY], search[RESIDUAL])
         while self.condition.numpy()[0]:
@@ -147,7 +174,8 @@ class Relaxation:
         flags, search = self.flags.numpy(), self.search.numpy()
         iterations, status, residual = int(flags[ITERATION]), int(flags[STATUS]), float(search[RESIDUAL])
         self.shell.relax_history = self.history.numpy()[: iterations + 1].tolist()
-        if status == CONVERGED:
+        self.status = status
+        if status in (CONVERGED, STALE):
             if out is None:
                 return self.x.numpy().astype(np.float64)
             wp.copy(out, self.x)
@@ -165,7 +193,18 @@ class Relaxation:
 
 def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None):
     """Relax `shell` from positions x (device array); the shell keeps its Relaxation (buffers, graph).
-    Returns the positions (NumPy), or writes them to the device array `out` and returns None."""
+    Returns the positions (NumPy), or writes them to the device array `out` and returns None.
+
+    With self-contact its candidate pairs are searched at x, and again wherever the loop stops
+    because the positions left a quarter of the search's skin (STALE); the loop then resumes.
+    """
     if shell._relaxation is None:
         shell._relaxation = Relaxation(shell)
-    return shell._relaxation.run(x, tol, max_iterations, callback, out)
+    relaxation, contact = shell._relaxation, shell.self_contact
+    if contact is not None:
+        contact.search(x)
+    result = relaxation.run(x, tol, max_iterations, callback, out)
+    while relaxation.status == STALE:
+        contact.search(relaxation.x)
+        result = relaxation.run(relaxation.x, tol, max_iterations, callback, out, resume=True)
+    return result

@@ -19,6 +19,7 @@ import numpy as np
 from .coupled import QuasiStatic
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh
+from .self_contact import SelfContact
 from .shell import Shell
 from .unfolding import first_arrival
 from .waves import Telegraph, gaussian_pulse, steady_front
@@ -168,6 +169,11 @@ class QuasiStaticWaveRun(WaveClock):
         self.shell = Shell(mesh, thickness=p["thickness"], young=p["young"], poisson=p["poisson"], AC=p["AC"],
                            AI=p["AI"], volume_penalty=p["mu_v"] * p["young"] * p["thickness"] / size**4, rule=rule,
                            device=device, dtype=dtype)  # fmt: skip
+        if p.get("self_contact"):
+            try:
+                self.shell.self_contact = SelfContact(self.shell)
+            except ValueError as error:  # too coarse a mesh: name the scene's switches
+                raise ValueError(f"{error}: raise --set level, or --set self_contact=false") from None
         self.operator = LaplaceBeltrami(mesh, rule=rule, device=device, dtype=dtype)
         if initial["kind"] == "gaussian":
             c0, v0 = gaussian_pulse(self.operator, origin, initial["sigma"], gamma=p["gamma"], radius=size,
@@ -232,6 +238,9 @@ class QuasiStaticWaveRun(WaveClock):
                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
                "unconverged_relaxations": self.coupled.unconverged,
                "round_off_relaxations": self.coupled.round_off_stops}  # fmt: skip
+        if self.shell.self_contact is not None:
+            out["self_contact_pairs"] = self.shell.self_contact.pairs() // 2
+            out["self_contact_searches"] = self.shell.self_contact.searches
         if self._measure is not None:
             out.update(self._measure(self))
         return out

@@ -127,6 +127,22 @@ class Shell:
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
         self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
+        self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
+
+    @property
+    def self_contact(self):
+        """The shell's SelfContact term (wavewarp/self_contact.py), or None (the default)."""
+        return self._self_contact
+
+    @self_contact.setter
+    def self_contact(self, term) -> None:
+        from .self_contact import SelfContact
+
+        if term is not None and (not isinstance(term, SelfContact) or term.shell is not self):
+            raise ValueError("self_contact must be None or a SelfContact built for this shell")
+        self._self_contact = term
+        if self._relaxation is not None:
+            self._relaxation.forget_graphs()  # a captured relaxation loop holds the old set of terms
 
     # ---------------------------------------------------------------- device-level API
     def _s(self, value) -> object:
@@ -187,6 +203,8 @@ class Shell:
         """energy[0] = E(x) at the current reference (float64; differentiable with wp.Tape)."""
         wp.launch(koiter_energy_kernel, dim=self.tables.n_quadrature_points, inputs=self._elastic_inputs(x),
                   outputs=[self._energy_density], device=self.device)  # fmt: skip
+        if self.self_contact is not None:
+            self.self_contact.add_forces(x, None, self._energy_density)
         self._sum(self._energy_density, energy, differentiable=True)
         if self.volume_penalty > 0:
             self._launch_volume(x, differentiable=True)
@@ -221,6 +239,8 @@ class Shell:
                       inputs=[self._jets, self._vertex_entry_start, self._vertex_entries, self._entry_triangle,
                               t.patch_start, t.triangle_type, t.basis, t.points_per_triangle, *volume],
                       outputs=[forces], device=self.device)  # fmt: skip
+        if self.self_contact is not None:
+            self.self_contact.add_forces(x, forces, None if energy is None else self._energy_density)
         if energy is not None:
             self._sum(self._energy_density, energy, differentiable=False)
             if self.volume_penalty > 0:
@@ -238,7 +258,7 @@ class Shell:
         tape.zero()
 
     # ---------------------------------------------------------------- NumPy API
-    def _set(self, x, c) -> wp.array:
+    def _set(self, x, c, search: bool = True) -> wp.array:
         x = checked_positions(x, self.mesh.n_vertices)
         c = self.checked_concentrations(c)
         self._x.assign(x.astype(self._real))
@@ -246,6 +266,8 @@ class Shell:
             self._c.assign(c.astype(self._real))
             self.update_reference(self._c)
             self._c_host = c.copy()
+        if search and self.self_contact is not None:
+            self.self_contact.search(self._x)  # relax searches itself
         return self._x
 
     def checked_concentrations(self, c) -> np.ndarray:
@@ -292,7 +314,7 @@ class Shell:
         if tol is None:
             tol = 1e-5 if self.scalar == wp.float32 else 1e-9
         tol = positive("tol", tol)
-        xw = self._set(x0, c)
+        xw = self._set(x0, c, search=False)
         return relax(self, xw, tol, int(max_iterations), callback)
 
 
