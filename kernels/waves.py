@@ -33,6 +33,15 @@ def telegraph_kernel(acceleration: wp.array(dtype=Any), gamma2: Any, damping: An
     c[i] = c[i] + dt * velocity
 
 
+@wp.kernel
+def telegraph_recentre_kernel(acceleration: wp.array(dtype=Any), gamma2: Any, alpha: Any, shift: Any,
+                              v: wp.array(dtype=Any)):  # fmt: skip
+    """v ← v + shift (-γ² M̃⁻¹Kc^n - α v): the half-step velocity moved from t_n - dt₀/2 to
+    t_n - dt₁/2 when the step changes from dt₀ to dt₁ (shift = (dt₀ - dt₁)/2)."""
+    i = wp.tid()
+    v[i] = v[i] + shift * (-gamma2 * acceleration[i] - alpha * v[i])
+
+
 @wp.func
 def fhn_reaction(c: Any, nu: Any):
     """c (1 - c)(c - ν) (SPEC §5, evaluated on control values)."""
@@ -187,3 +196,5 @@ declare_overloads(cg_direction_kernel, z=_S, rz=_S, rz_new=_S, p=_S)
 declare_overloads(cg_condition_kernel, rz_new=_S, rz=_S, rz_stop=_S)
 declare_overloads(cg_stop_kernel, rz=_S, bz=_S, tol2="scalar", rz_stop=_S)
 declare_overloads(cg_failed_kernel, rz=_S, rz_stop=_S)
+declare_overloads(telegraph_recentre_kernel, acceleration="scalar[]", gamma2="scalar", alpha="scalar", shift="scalar",
+                  v="scalar[]")  # fmt: skip

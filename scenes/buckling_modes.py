@@ -14,6 +14,9 @@ PARAMETERS = {
     "overdamped": Param(True, "buckling is an instability: near it a relaxation may not converge within its budget; "
                         "the paper's overdamped update lets the shell lag its reference there (counted in --json)"),
     "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
+    "adaptive_dt": Param(True, "where a sharpening fold lowers the wave's stability bound below dt, go on at 0.9 × "
+                         "the bound (the leapfrog re-centred, relaxations at the same time interval) instead of "
+                         "stopping; dt returns when the bound allows"),  # fmt: skip
     "self_contact": Param(True, "keep the layers apart where the everted cap meets the far side (ours; SPEC has none): "
                           "contact distance h, docs/shell.md \"Self-contact\""),  # fmt: skip
     "noise": Param(1e-4, "rest-shape imperfection / R: breaks the symmetry so the n-fold mode can form",

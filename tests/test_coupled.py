@@ -73,3 +73,30 @@ def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
     for _ in range(3):
         run.step()  # each step continues the relaxation from where the last one stopped
     assert run.shell.energy(run.positions(), c0) < energy
+
+
+def test_overdamped_accepts_a_round_off_stop_and_quasi_static_refuses_it(monkeypatch):
+    """A relaxation whose line search finds no lower energy far above tol (as at the buckling's
+    sharpest fold, docs/scenes.md): quasi-static runs stop, overdamped ones go on from where it
+    stopped and count it."""
+    import wavewarp.coupled
+
+    mesh = icosphere(1.0, 2)
+    c0 = np.full(mesh.n_vertices, 1.0)
+    stopped_at = mesh.vertices * 0.99
+
+    def no_lower_energy(shell, x, tol, max_iterations, out=None):
+        shell.relax_history = [0.0, -1.0]
+        raise RelaxationError("relax stopped after 1 iterations (the line search found no lower energy)", 0.5,
+                              stopped_at, round_off=True)  # fmt: skip
+
+    monkeypatch.setattr(wavewarp.coupled, "relax", no_lower_energy)
+
+    def coupled(**options):
+        return QuasiStatic(Shell(mesh, thickness=0.05, young=1.0, AI=0.5, **F64),
+                           Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), **options)  # fmt: skip
+
+    with pytest.raises(RelaxationError, match="no lower energy"):
+        coupled()
+    run = coupled(overdamped=True)
+    assert run.unconverged == 1 and np.array_equal(run.positions(), stopped_at)

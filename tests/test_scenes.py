@@ -62,17 +62,62 @@ def test_resuming_from_hdf5_gives_the_uninterrupted_trajectory(tmp_path, capsys)
     full, part = tmp_path / "full.h5", tmp_path / "part.h5"
     args = ["starfish", "--quick", "--device", "cpu", "--set", "frames=4", "--set", "t_end=8", "--set", "dtype=float64"]
     assert run_cli(capsys, *args, "--out", str(tmp_path / "full.usda"), "--h5", str(full))[0] == 0
+    assert_resumed_run_equals(capsys, "starfish", full, part, keep=2)  # as if Ctrl-C had stopped it after two frames
+
+
+def assert_resumed_run_equals(capsys, scene, full, part, keep):
+    """Cut a copy of the run's HDF5 file `full` to its first `keep` frames, resume it, and compare."""
     shutil.copyfile(full, part)
-    with h5py.File(part, "r+") as f:  # as if Ctrl-C had stopped it after two frames
+    with h5py.File(part, "r+") as f:
         for name in f["frames"]:
-            dataset = f["frames"][name]
-            dataset.resize((2, *dataset.shape[1:]))
-    code, _, err = run_cli(capsys, "starfish", "--device", "cpu", "--resume", "--h5", str(part), "--out",
-                           str(tmp_path / "part.usda"))  # fmt: skip
+            f["frames"][name].resize((keep, *f["frames"][name].shape[1:]))
+    code, _, err = run_cli(capsys, scene, "--device", "cpu", "--resume", "--h5", str(part), "--out",
+                           str(part.with_suffix(".usda")))  # fmt: skip
     assert code == 0, err
     with h5py.File(full, "r") as a, h5py.File(part, "r") as b:
         for name in a["frames"]:
             np.testing.assert_allclose(b["frames"][name][...], a["frames"][name][...], rtol=0, atol=1e-12)
+
+
+@pytest.fixture
+def falling_bound(monkeypatch):
+    """The wave operator's λ_max × 16 (its bound ÷ 4) once the shell has moved more than 4 length
+    units from rest: a stand-in, a function of the state alone, for a fold sharpening below the mesh."""
+    from wavewarp.laplace import LaplaceBeltrami
+
+    update, largest = LaplaceBeltrami.update, LaplaceBeltrami.largest_eigenvalue
+
+    def tracked_update(self, x=None):
+        update(self, x)
+        moved = self.mesh.vertices if x is None else (x.numpy() if hasattr(x, "numpy") else np.asarray(x))
+        self.test_displacement = float(np.abs(moved - self.mesh.vertices).max())
+
+    def sharpened(self, *args, **kwargs):
+        return largest(self, *args, **kwargs) * (16.0 if getattr(self, "test_displacement", 0.0) > 4.0 else 1.0)
+
+    monkeypatch.setattr(LaplaceBeltrami, "update", tracked_update)
+    monkeypatch.setattr(LaplaceBeltrami, "largest_eigenvalue", sharpened)
+
+
+def test_adaptive_dt_goes_on_below_a_falling_bound_and_resumes_exactly(falling_bound, tmp_path, capsys):
+    args = ["buckling", "--device", "cpu", "--set", "level=3", "--set", "frames=6", "--set", "t_end=6",
+            "--set", "dtype=float64", "--json"]  # fmt: skip
+    code, _, err = run_cli(capsys, *args, "--set", "adaptive_dt=false", "--out", str(tmp_path / "fixed.usda"))
+    assert code == 1 and "exceeds the stability bound" in err  # the bound does fall below the scene's dt
+    full, part = tmp_path / "full.h5", tmp_path / "part.h5"
+    code, out, err = run_cli(capsys, *args, "--out", str(tmp_path / "full.usda"), "--h5", str(full))
+    assert code == 0, err
+    summary = json.loads(out)
+    with h5py.File(full, "r") as f:
+        dt = json.loads(f.attrs["parameters"])["dt"]
+        times, steps = f["frames/time"][...], f["frames/chemistry_dt"][...]
+    # the scene's dt is 0.4 × the rest bound; after the fall, 0.9 × a quarter of it: 0.5625 dt
+    assert summary["chemistry_dt_changes"] >= 1 and summary["chemistry_dt"] < 0.6 * dt
+    assert steps[0] == dt and steps[-1] == summary["chemistry_dt"]
+    interval = times[1] - times[0]
+    assert np.abs(times - interval * np.arange(len(times))).max() <= summary["chemistry_dt"]  # frames on time
+    # stopped after the first frame stepped with the small dt
+    assert_resumed_run_equals(capsys, "buckling", full, part, keep=int(np.flatnonzero(steps < dt)[0]) + 1)
 
 
 def test_uniform_concentration_through_the_cli_reaches_the_closed_form_radius(tmp_path, capsys):

@@ -39,9 +39,9 @@ class QuasiStatic:
 
     `sensitive=True`: the wave runs on the current (deformed) surface; False: on the rest
     surface (the deformation-insensitive twin). `tol`: the relaxation tolerance (Shell.relax).
-    `overdamped=True` accepts a relaxation that spends its `max_iterations` (the paper's
-    overdamped update: near a buckling instability the shell lags its reference instead of
-    stopping the run); such steps are counted in `unconverged`.
+    `overdamped=True` accepts a relaxation that spends its `max_iterations` or whose line search
+    finds no lower energy (the paper's overdamped update: near a buckling instability the shell
+    lags its reference instead of stopping the run); such steps are counted in `unconverged`.
     """
 
     def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
@@ -86,8 +86,10 @@ class QuasiStatic:
         except RelaxationError as error:
             if error.round_off and error.residual <= ROUND_OFF_SLACK * self.tol:
                 self.round_off_stops += 1  # the dtype's round-off floor just above tol (sharp corners, float32)
-            elif self.overdamped and not error.round_off:
-                self.unconverged += 1  # overdamped: the shell lags its reference, the next step goes on from here
+            elif self.overdamped:
+                # overdamped: the shell lags its reference (budget spent, or no lower energy found at a
+                # sharp fold: docs/scenes.md "Open"); the next step goes on from here
+                self.unconverged += 1
             else:
                 raise
             self._x.assign(error.x.astype(self.shell._real))

@@ -22,7 +22,7 @@ from .mesh import Mesh
 from .self_contact import SelfContact
 from .shell import Shell
 from .unfolding import first_arrival
-from .waves import Telegraph, gaussian_pulse, steady_front
+from .waves import Telegraph, TimeStepError, gaussian_pulse, steady_front
 
 
 class SceneError(ValueError):
@@ -159,7 +159,9 @@ class QuasiStaticWaveRun(WaveClock):
     """A telegraph wave on a quasi-static active shell: the oocyte, wave-guide and buckling scenes.
 
     `initial` is "gaussian" (origin, sigma) or "front" (origin, k, delta). Frames are written
-    at multiples of `steps_per_frame × dt` up to `t_end`.
+    at multiples of `steps_per_frame × dt` up to `t_end` (with `adaptive_dt`, at the first step
+    within half a coupled step of them). Parameters `self_contact` and `adaptive_dt`, where a scene
+    has them, add the SelfContact term and the adaptive chemistry step (docs/scenes.md).
     """
 
     def __init__(self, name: str, mesh: Mesh, p: dict, *, size: float, origin, initial: dict, t_end: float,
@@ -193,6 +195,13 @@ class QuasiStaticWaveRun(WaveClock):
         self.resolved = {**p, "dt": dt, "relax_every": relax_every}
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
+        # adaptive_dt: below a bound that the moving surface lowered, step at safety × the bound,
+        # relaxing at the same time interval; the scene's dt returns at a frame where the bound allows
+        self.adaptive = bool(p.get("adaptive_dt"))
+        self.base_dt, self.relax_interval, self.frame_interval = dt, relax_every * dt, self.steps_per_frame * dt
+        self.dt_changes = 0
+        if self.adaptive:
+            self.series["chemistry_dt"] = ()  # the step a frame's c_t belongs to (resume)
         self.field_range = (0.0, 1.0)
         self.size = size
         self.origin = np.asarray(origin, dtype=np.float64)
@@ -204,22 +213,48 @@ class QuasiStaticWaveRun(WaveClock):
 
     def frame(self) -> dict:
         """The current frame: control positions, concentrations and the wave's rate c_t (control values)."""
-        return {"positions": self.coupled.positions(), "concentration": self.wave.concentration(),
-                "concentration_rate": self.wave.velocity()}  # fmt: skip
+        frame = {"positions": self.coupled.positions(), "concentration": self.wave.concentration(),
+                 "concentration_rate": self.wave.velocity()}  # fmt: skip
+        if self.adaptive:
+            frame["chemistry_dt"] = np.array(self.wave.dt)
+        return frame
 
     def advance_frame(self) -> None:
-        for _ in range(self.steps_per_frame // self.coupled.chemistry_steps):
-            self.coupled.step()
+        """Coupled steps to the next multiple of the frame interval (within half a coupled step)."""
+        end = (round(self.time / self.frame_interval) + 1) * self.frame_interval
+        if self.adaptive and self.wave.dt < self.base_dt:
+            recovered = min(self.base_dt, self.wave.safety * self.wave.stable_dt)
+            if recovered > 1.5 * self.wave.dt:
+                self._change_dt(recovered)
+        while end - self.time > 0.5 * self.coupled.chemistry_steps * self.wave.dt:
+            try:
+                self.coupled.step()
+            except TimeStepError:  # raised before the wave stepped: nothing moved
+                if not self.adaptive:
+                    raise
+                self._change_dt(self.wave.safety * self.wave.stable_dt)
+                continue
             self.arrival.update(self.wave.concentration(), self.wave.time)
 
+    def _change_dt(self, dt: float, recentre: bool = True) -> None:
+        self.wave.change_dt(dt, recentre=recentre)
+        self.coupled.chemistry_steps = max(1, round(self.relax_interval / dt))
+        self.dt_changes += 1
+
     def restore(self, frame: dict) -> None:
-        """Continue from a saved frame (HDF5 resume): positions, c, c_t and the time."""
+        """Continue from a saved frame (HDF5 resume): positions, c, c_t, the time and (adaptive) dt."""
         real = self.shell._real
+        self.coupled.restore(frame["positions"])
         self.wave.c.assign(np.asarray(frame["concentration"]).astype(real))
         self.wave.v.assign(np.asarray(frame["concentration_rate"]).astype(real))
+        if self.adaptive:
+            if float(frame["chemistry_dt"]) != self.wave.dt:
+                self._change_dt(float(frame["chemistry_dt"]), recentre=False)  # c_t already belongs to it
+            self.wave.time = float(frame["time"])
+            self.wave.steps = int(round(self.wave.time / self.base_dt))
+            return
         self.wave.steps = int(round(frame["time"] / self.wave.dt))
         self.wave.time = self.wave.steps * self.wave.dt
-        self.coupled.restore(frame["positions"])
 
     def record(self, time: float, frame: dict, stored: bool = False) -> None:
         """Note a written frame for the figures (and, for frames read back on resume, the arrival times)."""
@@ -228,7 +263,7 @@ class QuasiStaticWaveRun(WaveClock):
         if self._profile is not None:
             self.profile_time = time
             self.profiles.append((time, self._profile(self, frame["positions"])))
-        target = self.frames * self.steps_per_frame * self.wave.dt / 3
+        target = self.frames * self.frame_interval / 3
         if self.snapshot is None or abs(time - target) < abs(self.snapshot[0] - target):
             self.snapshot = (time, np.array(frame["positions"]), np.array(frame["concentration"]))
 
@@ -238,6 +273,8 @@ class QuasiStaticWaveRun(WaveClock):
                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
                "unconverged_relaxations": self.coupled.unconverged,
                "round_off_relaxations": self.coupled.round_off_stops}  # fmt: skip
+        if self.adaptive:
+            out["chemistry_dt_changes"], out["chemistry_dt"] = self.dt_changes, self.wave.dt
         if self.shell.self_contact is not None:
             out["self_contact_pairs"] = self.shell.self_contact.pairs() // 2
             out["self_contact_searches"] = self.shell.self_contact.searches

@@ -49,6 +49,7 @@ from .kernels.waves import (
     runaway_kernel,
     shifted_operator_kernel,
     telegraph_kernel,
+    telegraph_recentre_kernel,
 )
 from .laplace import DOT_STRIDE, LaplaceBeltrami
 
@@ -105,7 +106,7 @@ class _Stepper(ABC):
         self.time = 0.0
         self.steps = 0
         self.largest_eigenvalue = None
-        self._geometry_version = None
+        self._geometry_version = self._bound_version = None
         self._graphs = {}
         self._backups = None
         with wp.ScopedDevice(self.device):
@@ -142,14 +143,19 @@ class _Stepper(ABC):
     @property
     def stable_dt(self) -> float:
         """The method's stability bound at the current surface (see `bound_formula`)."""
-        self._refresh()
+        self._update_bound()
         return self._stable_dt
+
+    def _update_bound(self) -> None:
+        if self._bound_version != self.operator.version:
+            self.largest_eigenvalue = self.operator.largest_eigenvalue(self.mass_corrections)
+            self._stable_dt = self._bound(self.largest_eigenvalue)
+            self._bound_version = self.operator.version
 
     def _refresh(self) -> None:
         if self._geometry_version == self.operator.version:
             return
-        self.largest_eigenvalue = self.operator.largest_eigenvalue(self.mass_corrections)
-        self._stable_dt = self._bound(self.largest_eigenvalue)
+        self._update_bound()
         if self._requested_dt is None:
             dt = self.safety * self._stable_dt
         else:
@@ -166,6 +172,24 @@ class _Stepper(ABC):
             self._graphs.clear()
         self._geometry_version = self.operator.version
         self._geometry_changed()
+
+    def change_dt(self, dt: float, recentre: bool = True) -> None:
+        """Step from now on with `dt` (fixed), e.g. below a bound that the moving surface lowered.
+        The telegraph's half-step velocity is re-centred to the new step (`recentre=False`: it
+        already belongs to dt, as in a frame saved after a change), which keeps the leapfrog second
+        order across the change. Raises TimeStepError past the current bound."""
+        dt = positive("dt", dt)
+        self._update_bound()
+        if self.check_dt and dt > self._stable_dt:
+            raise TimeStepError(f"dt = {dt:.6g} exceeds the stability bound {self._stable_dt:.6g} of the {self.scheme}")
+        if recentre:
+            self._recentre(self.dt, dt)
+        self._requested_dt = self.dt = dt
+        self._geometry_version = None  # the next step re-checks dt against the bound
+        self._graphs.clear()
+
+    def _recentre(self, old: float, new: float) -> None:
+        """Move a staggered state from step `old` to step `new` (the leapfrog's half-step velocity)."""
 
     # ---------------------------------------------------------------- stepping
     def _diffusion_acceleration(self, c: wp.array) -> None:
@@ -310,6 +334,13 @@ class Telegraph(_Stepper):
         wp.launch(telegraph_kernel, dim=len(self.c),
                   inputs=[self._acceleration, s(self.gamma**2), s(0.5 * self.alpha * self.dt), s(self.dt)],
                   outputs=[self.c, self.v], device=self.device)  # fmt: skip
+
+    def _recentre(self, old: float, new: float) -> None:
+        self._diffusion_acceleration(self.c)
+        s = self.scalar
+        wp.launch(telegraph_recentre_kernel, dim=len(self.v),
+                  inputs=[self._acceleration, s(self.gamma**2), s(self.alpha), s(0.5 * (old - new))], outputs=[self.v],
+                  device=self.device)  # fmt: skip
 
     def _state(self) -> list:
         return [self.c, self.v]
