@@ -120,6 +120,29 @@ def test_adaptive_dt_goes_on_below_a_falling_bound_and_resumes_exactly(falling_b
     assert_resumed_run_equals(capsys, "buckling", full, part, keep=int(np.flatnonzero(steps < dt)[0]) + 1)
 
 
+def test_a_blow_up_at_an_unresolved_fold_says_so(monkeypatch):
+    """A wave blow-up where a vertex's lumped mass has grown 200× (a fold sharper than the mesh)
+    names the vertex and the fix; the same blow-up on a resolved surface is passed on unchanged."""
+    from wavewarp.scene import load_scene, resolve
+    from wavewarp.waves import BlowUpError
+
+    module = load_scene("buckling")
+    run = module.build(resolve(module.PARAMETERS, None, ["level=3"]), device="cpu", report=lambda message: None)
+
+    def blow_up():
+        raise BlowUpError("telegraph leapfrog blew up", run.time, run.steps)
+
+    monkeypatch.setattr(run.coupled, "step", blow_up)
+    with pytest.raises(BlowUpError) as plain:
+        run.advance_frame()
+    assert str(plain.value) == "telegraph leapfrog blew up"
+    swollen = run.rest_mass.copy()
+    swollen[7] *= 200.0
+    monkeypatch.setattr(run.operator, "mass", lambda: swollen)
+    with pytest.raises(BlowUpError, match=r"vertex 7's lumped mass is 200× its rest value .* \(--set level\)"):
+        run.advance_frame()
+
+
 def test_uniform_concentration_through_the_cli_reaches_the_closed_form_radius(tmp_path, capsys):
     """--set width=1e6 makes the pulse uniform (c = 1 to 1e-10); without μV the stretch solves
     λ³ - (s - ε) λ - ε k = 0 (SPEC §8)."""

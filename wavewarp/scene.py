@@ -22,7 +22,7 @@ from .mesh import Mesh
 from .self_contact import SelfContact
 from .shell import Shell
 from .unfolding import first_arrival
-from .waves import Telegraph, TimeStepError, gaussian_pulse, steady_front
+from .waves import BlowUpError, Telegraph, TimeStepError, gaussian_pulse, steady_front
 
 
 class SceneError(ValueError):
@@ -155,6 +155,10 @@ class WaveClock:
         return self.wave.steps
 
 
+UNRESOLVED_MASS_GROWTH = 50.0  # a vertex's lumped mass over its rest value past which a blow-up is named a fold
+# sharper than the mesh (level-4 buckling, H100: at most 5.5× over its 3-fold fold to t = 15.2, ~1000× at the blow-up)
+
+
 class QuasiStaticWaveRun(WaveClock):
     """A telegraph wave on a quasi-static active shell: the oocyte, wave-guide and buckling scenes.
 
@@ -197,6 +201,7 @@ class QuasiStaticWaveRun(WaveClock):
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
         # adaptive_dt: below a bound that the moving surface lowered, step at safety × the bound,
         # relaxing at the same time interval; the scene's dt returns at a frame where the bound allows
+        self.rest_mass = self.operator.mass()
         self.adaptive = bool(p.get("adaptive_dt"))
         self.base_dt, self.relax_interval, self.frame_interval = dt, relax_every * dt, self.steps_per_frame * dt
         self.dt_changes = 0
@@ -234,7 +239,21 @@ class QuasiStaticWaveRun(WaveClock):
                     raise
                 self._change_dt(self.wave.safety * self.wave.stable_dt)
                 continue
+            except BlowUpError as error:
+                raise self._diagnosed(error) from None
             self.arrival.update(self.wave.concentration(), self.wave.time)
+
+    def _diagnosed(self, error: BlowUpError) -> BlowUpError:
+        """The blow-up, with the cause named where a vertex's lumped mass has grown far past its rest
+        value: a fold sharper than the mesh, where each relaxation pumps energy into the wave
+        (docs/scenes.md "Open")."""
+        growth = self.operator.mass() / self.rest_mass
+        vertex = int(np.argmax(growth))
+        if not self.p["sensitive"] or growth[vertex] < UNRESOLVED_MASS_GROWTH:
+            return error
+        return BlowUpError(f"{error}. The surface is not resolved there: vertex {vertex}'s lumped mass is "
+                           f"{growth[vertex]:.0f}× its rest value (a fold sharper than the mesh); refine the mesh "
+                           "(--set level)", error.time, error.steps)  # fmt: skip
 
     def _change_dt(self, dt: float, recentre: bool = True) -> None:
         self.wave.change_dt(dt, recentre=recentre)
