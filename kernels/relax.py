@@ -18,7 +18,7 @@ SEARCH_SIZE = 12
 # flags[...] (int32)
 ACCEPTED, PROBING, TRIES, ITERATION, STATUS, RESTART, MOVED, STALLED, FAR_TRIAL, OUTSIDE_SKIN = range(10)
 FLAGS_SIZE = 10
-# flags[STATUS]; STALE: x left half the self-contact search's skin, the caller searches again and goes on
+# flags[STATUS]; STALE: x left a quarter of the self-contact search's skin, the caller searches again and goes on
 RUNNING, CONVERGED, BUDGET_SPENT, NO_DESCENT, STALE = range(5)
 # sums[...] (the shell's scalar): F·s, F·(s − s_old), F·d, max |F|
 FS_SUM, FDS_SUM, FD_SUM, FMAX_SUM = range(4)
@@ -57,8 +57,6 @@ def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype
     flags[PROBING] = 1
     flags[STALLED] = 0
     flags[TRIES] = 0
-    flags[FAR_TRIAL] = 0
-    flags[OUTSIDE_SKIN] = 0
     flags[ITERATION] = 0
     flags[RESTART] = 0
     flags[MOVED] = 0
@@ -232,7 +230,6 @@ def resume_kernel(flags: wp.array(dtype=wp.int32), condition: wp.array(dtype=wp.
     """Go on after a STALE stop (a new self-contact search): the CG state is kept, since the old
     candidates already held every pair within the contact distance."""
     flags[STATUS] = RUNNING
-    flags[OUTSIDE_SKIN] = 0
     condition[0] = 1
 
 

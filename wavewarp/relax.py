@@ -10,9 +10,9 @@ import numpy as np
 import warp as wp
 
 from .device import run_steps
-from .kernels import reduce as kernels_reduce
 from .kernels import contact as kernels_contact
 from .kernels import limit_surface as kernels_limit_surface
+from .kernels import reduce as kernels_reduce
 from .kernels import relax as kernels_relax
 from .kernels import self_contact as kernels_self_contact
 from .kernels import shell as kernels_shell
@@ -20,8 +20,8 @@ from .kernels.relax import (
     ACCEPTED,
     BUDGET_SPENT,
     CONVERGED,
-    FAR_TRIAL,
     ENERGY,
+    FAR_TRIAL,
     FLAGS_SIZE,
     ITERATION,
     OUTSIDE_SKIN,
@@ -89,8 +89,9 @@ class Relaxation:
     def run(self, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None,
             resume: bool = False):  # fmt: skip
         """Relax from x to max |F| <= tol · Y h ℓ̄; returns the positions (V, 3) in float64, or, with
-        `out` (a device array, may be x), writes them there and returns None. `resume` goes on
-        from a STALE stop with the CG state, iteration count and budget as they were."""
+        `out` (a device array, may be x), writes them there and returns None; after a STALE stop it
+        returns None and writes nothing. `resume` goes on from a STALE stop with the CG state,
+        iteration count and budget as they were."""
         shell = self.shell
         if not resume:
             if self.history is None or len(self.history) < max_iterations + 1:
@@ -175,7 +176,9 @@ class Relaxation:
         iterations, status, residual = int(flags[ITERATION]), int(flags[STATUS]), float(search[RESIDUAL])
         self.shell.relax_history = self.history.numpy()[: iterations + 1].tolist()
         self.status = status
-        if status in (CONVERGED, STALE):
+        if status == STALE:
+            return None  # relax() searches again and resumes; only the final round's result is read
+        if status == CONVERGED:
             if out is None:
                 return self.x.numpy().astype(np.float64)
             wp.copy(out, self.x)

@@ -64,16 +64,15 @@ class SelfContact:
         if spacing > math.sqrt(3) * self.distance:  # a point through the widest gap stays within d of three
             raise ValueError(f"the quadrature points are {spacing:.3g} apart, more than √3 × the contact distance "
                              f"{self.distance:.3g}: layers could pass between them; refine the mesh")  # fmt: skip
-        n_q, radius = t.n_quadrature_points, (1 + self.skin) * self.distance
+        n_q, self.radius = t.n_quadrature_points, (1 + self.skin) * self.distance  # the candidate search's
         # one layer's points within the search radius, three layers' worth of room
-        self.capacity = int(3 * math.pi * radius**2 / spacing**2) + 16
+        self.capacity = int(3 * math.pi * self.radius**2 / spacing**2) + 16
         with wp.ScopedDevice(shell.device):
             self.points = wp.zeros(n_q, dtype=shell.vec3)
             self.built = wp.zeros(n_q, dtype=shell.vec3)
             self.pressures = wp.zeros(n_q, dtype=shell.vec3)
             self.counts = wp.zeros(n_q, dtype=wp.int32)
             self.neighbours = wp.zeros((n_q, self.capacity), dtype=wp.int32)
-            self.moved = wp.zeros(1, dtype=wp.int32)
             self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, dtype=shell.scalar)
         self.searches = 0  # candidate searches so far
 
@@ -86,12 +85,11 @@ class SelfContact:
     def search(self, x: wp.array) -> None:
         """Candidate pairs at positions x (one host read: a row that overflowed grows the table)."""
         s = self.shell.scalar
-        radius = (1 + self.skin) * self.distance
         self._points(x, self.built)
-        self.grid.build(self.built, radius)
+        self.grid.build(self.built, self.radius)
         while True:
             wp.launch(self_contact_candidates_kernel, dim=len(self.built),
-                      inputs=[wp.uint64(self.grid.id), self.built, self.rest_points, s(radius), s(self.exclusion)],
+                      inputs=[wp.uint64(self.grid.id), self.built, self.rest_points, s(self.radius), s(self.exclusion)],
                       outputs=[self.neighbours, self.counts], device=self.shell.device)  # fmt: skip
             most = int(self.counts.numpy().max())
             if most <= self.capacity:
@@ -121,7 +119,6 @@ class SelfContact:
                           int(energy_density is not None)],
                   outputs=[self.pressures, shell._energy_density if energy_density is None else energy_density],
                   device=shell.device)  # fmt: skip
-        patch = [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
         if forces is None:
             return
         if shell.deterministic:
@@ -130,6 +127,7 @@ class SelfContact:
                               shell._entry_triangle, t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
                       outputs=[forces], device=shell.device)  # fmt: skip
         else:
+            patch = [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
             wp.launch(quadrature_spread_kernel, dim=n_q, inputs=[self.pressures, self.area, *patch], outputs=[forces],
                       device=shell.device)  # fmt: skip
 
