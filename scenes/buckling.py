@@ -12,6 +12,8 @@ PARAMETERS = {
     "overdamped": Param(True, "buckling is an instability: near it a relaxation may not converge within its budget; "
                         "the paper's overdamped update lets the shell lag its reference there (counted in --json)"),
     "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
+    "relax_method": Param("ncg", "ncg: the budget is the overdamped shell's lag, so no Newton finish (auto and "
+                          "newton need self_contact=false)", choices=("auto", "ncg", "newton")),  # fmt: skip
     "adaptive_dt": Param(True, "where a sharpening fold lowers the wave's stability bound below dt, go on at 0.9 × "
                          "the bound (the leapfrog re-centred, relaxations at the same time interval) instead of "
                          "stopping; dt returns when the bound allows"),  # fmt: skip

@@ -64,9 +64,10 @@ def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
     c0 = np.full(mesh.n_vertices, 1.0)
     parts = dict(thickness=0.05, young=1.0, AC=0.3, AI=0.5, **F64)
     with pytest.raises(RelaxationError, match="relax stopped after 3 iterations"):
-        QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3)
+        QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3,
+                    method="ncg")  # fmt: skip
     run = QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3,
-                      overdamped=True)  # fmt: skip
+                      overdamped=True, method="ncg")  # fmt: skip
     assert run.unconverged == 1 and run.relax_iterations == [3]
     energy = run.shell.energy(run.positions(), c0)
     assert energy < run.shell.energy(mesh.vertices, c0)  # three iterations of progress, kept
@@ -85,7 +86,7 @@ def test_overdamped_accepts_a_round_off_stop_and_quasi_static_refuses_it(monkeyp
     c0 = np.full(mesh.n_vertices, 1.0)
     stopped_at = mesh.vertices * 0.99
 
-    def no_lower_energy(shell, x, tol, max_iterations, out=None):
+    def no_lower_energy(shell, x, tol, max_iterations, out=None, **method):
         shell.relax_history = [0.0, -1.0]
         raise RelaxationError("relax stopped after 1 iterations (the line search found no lower energy)", 0.5,
                               stopped_at, round_off=True)  # fmt: skip

@@ -25,13 +25,11 @@ import warp as wp
 from . import kernels
 from .checks import count
 from .laplace import LaplaceBeltrami
-from .relax import relax
+from .relax import METHODS, ROUND_OFF_SLACK, relax
 from .device import run_steps
 from .kernels.dynamics import reference_ramp_kernel
 from .shell import RelaxationError, Shell
 from .waves import TimeStepError, _Stepper
-
-ROUND_OFF_SLACK = 10.0
 
 
 class QuasiStatic:
@@ -42,10 +40,13 @@ class QuasiStatic:
     `overdamped=True` accepts a relaxation that spends its `max_iterations` or whose line search
     finds no lower energy (the paper's overdamped update: near a buckling instability the shell
     lags its reference instead of stopping the run); such steps are counted in `unconverged`.
+    `method` and `max_iterations`, `newton_steps`: Shell.relax's ("auto": CG, then a Newton finish
+    where CG spends its budget; counted in `newton_finishes`).
     """
 
     def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
-                 x0=None, max_iterations: int = 20000, overdamped: bool = False):  # fmt: skip
+                 x0=None, max_iterations: int = 20000, overdamped: bool = False, method: str = "auto",
+                 newton_steps: int = 50):  # fmt: skip
         if not isinstance(shell, Shell):
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         if not isinstance(wave, _Stepper):
@@ -63,6 +64,10 @@ class QuasiStatic:
             tol = 1e-5 if shell.scalar == wp.float32 else 1e-9
         self.tol = float(tol)
         self.max_iterations = count("max_iterations", max_iterations, 1)
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+        self.method, self.newton_steps = method, count("newton_steps", newton_steps, 1)
+        self.newton_finishes = 0  # relaxations that Newton steps finished
         self.overdamped = bool(overdamped)
         self.unconverged = 0  # overdamped relaxations that used their whole iteration budget
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
@@ -82,7 +87,8 @@ class QuasiStatic:
     def _equilibrate(self) -> None:
         self.shell.update_reference(self.wave.c)
         try:
-            relax(self.shell, self._x, self.tol, self.max_iterations, out=self._x)  # device to device
+            relax(self.shell, self._x, self.tol, self.max_iterations, out=self._x, method=self.method,
+                  newton_steps=self.newton_steps)  # device to device
         except RelaxationError as error:
             if error.round_off and error.residual <= ROUND_OFF_SLACK * self.tol:
                 self.round_off_stops += 1  # the dtype's round-off floor just above tol (sharp corners, float32)
@@ -94,6 +100,7 @@ class QuasiStatic:
                 raise
             self._x.assign(error.x.astype(self.shell._real))
         self.relax_iterations.append(len(self.shell.relax_history) - 1)
+        self.newton_finishes += self.shell.newton_steps > 0
         if self.sensitive:
             self.operator.update(self._x)
 

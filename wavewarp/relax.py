@@ -43,6 +43,9 @@ from .kernels.relax import (
     trial_kernel,
 )
 
+METHODS = ("ncg", "newton", "auto")
+# a CG stop at the round-off floor within this factor of tol is the dtype's floor: Newton cannot help
+ROUND_OFF_SLACK = 10.0
 # relative round-off of the energy sum (float64 accumulation of float32 or float64 terms)
 ENERGY_NOISE = {wp.float32: 1e-7, wp.float64: 1e-12}
 
@@ -190,17 +193,65 @@ class Relaxation:
             f"{residual / tol:.3g}× the tolerance {tol:g}"
             + (" (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
                if round_off else "; raise max_iterations or tol"),  # fmt: skip
-            residual, x, round_off=round_off,
+            residual, x, round_off=round_off, iterations=iterations,
         )  # fmt: skip
 
 
-def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None):
-    """Relax `shell` from positions x (device array); the shell keeps its Relaxation (buffers, graph).
-    Returns the positions (NumPy), or writes them to the device array `out` and returns None.
+def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None,
+          method: str = "ncg", newton_steps: int = 50):  # fmt: skip
+    """Relax `shell` from positions x (device array) by `method` (Shell.relax); the shell keeps its
+    Relaxation and NewtonFinish (buffers, graph, Hessian pattern). Returns the positions (NumPy), or
+    writes them to the device array `out` and returns None.
 
-    With self-contact its candidate pairs are searched at x, and again wherever the loop stops
-    because the positions left a quarter of the search's skin (STALE); the loop then resumes.
+    "auto" hands over to Newton where CG spent its budget or stopped at round-off more than
+    ROUND_OFF_SLACK × tol away (nearer is the dtype's floor: it raises), not with self-contact.
     """
+    from .shell import RelaxationError
+
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if method == "newton":
+        return _newton(shell, x.numpy().astype(np.float64), tol, newton_steps, callback, out, [], 0)
+    try:
+        return _conjugate_gradients(shell, x, tol, max_iterations, callback, out)
+    except RelaxationError as error:
+        floor = error.round_off and error.residual <= ROUND_OFF_SLACK * tol
+        if method == "ncg" or floor or shell.self_contact is not None:
+            raise
+        history = list(shell.relax_history)
+        return _newton(shell, error.x, tol, newton_steps, callback, out, history[:-1], error.iterations)
+
+
+def _newton(shell, x0: np.ndarray, tol: float, steps: int, callback, out, history: list, iterations: int):
+    """The Newton finish (wavewarp/newton.py) from x0; the result as `relax` returns it."""
+    from .newton import NewtonFinish
+    from .shell import RelaxationError
+
+    if shell._newton is None:
+        shell._newton = NewtonFinish(shell)
+    x, status, residual, energies = shell._newton.run(x0, tol, steps, callback, iterations)
+    shell.relax_history = history + energies
+    shell.newton_steps = len(energies) - 1
+    if status != "converged":
+        raise RelaxationError(
+            f"relax stopped after {iterations} CG iterations and {len(energies) - 1} Newton steps at residual "
+            f"max|F|/(Y h ℓ̄) = {residual:.3g}, {residual / tol:.3g}× the tolerance {tol:g}"
+            + (" (no shift of the Newton step lowers the energy: round-off floor; use a larger tol)"
+               if status == "round-off" else "; raise newton_steps or tol"),  # fmt: skip
+            residual, x, round_off=status == "round-off", iterations=iterations,
+        )  # fmt: skip
+    if out is None:
+        return x
+    out.assign(x.astype(shell._real))
+    return None
+
+
+def _conjugate_gradients(shell, x: wp.array, tol: float, max_iterations: int, callback=None,
+                         out: wp.array | None = None):  # fmt: skip
+    """Nonlinear CG from x; with self-contact its candidate pairs are searched at x, and again
+    wherever the loop stops because the positions left a quarter of the search's skin (STALE);
+    the loop then resumes."""
+    shell.newton_steps = 0
     if shell._relaxation is None:
         shell._relaxation = Relaxation(shell)
     relaxation, contact = shell._relaxation, shell.self_contact

@@ -117,7 +117,11 @@ TELEGRAPH_PARAMETERS = {
     "relax_every": Param(0, "chemistry steps per relaxation; 0 = as many as keep the wave within half a "
                          "control edge between relaxations (quasi-static: τ_mech ≪ τ_wave)", minimum=0),  # fmt: skip
     "relax_tol": Param(0.0, "relaxation tolerance (a residual strain, Shell.relax); 0 = the dtype's default", minimum=0.0),
-    "relax_iterations": Param(20000, "NCG iteration budget per relaxation", minimum=1),
+    "relax_iterations": Param(20000, "CG iteration budget per relaxation; where CG spends it, Newton steps finish "
+                              "(relax_method auto)", minimum=1),  # fmt: skip
+    "relax_method": Param("auto", "auto: CG, then a Newton finish where CG spends its budget (the late oocytes' "
+                          "nearly singular Hessian, docs/shell.md); ncg: CG only; newton: Newton only",
+                          choices=("auto", "ncg", "newton")),  # fmt: skip
     "overdamped": Param(False, "true: a relaxation that spends its budget is accepted (the paper's overdamped "
                         "update; counted in --json) instead of stopping the run"),  # fmt: skip
     "dtype": Param("float32", "float32 (default; checked against float64 in tests) or float64",
@@ -195,7 +199,7 @@ class QuasiStaticWaveRun(WaveClock):
         self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
                                    tol=p["relax_tol"] or None, max_iterations=p["relax_iterations"],
-                                   overdamped=p["overdamped"])  # fmt: skip
+                                   overdamped=p["overdamped"], method=p["relax_method"])  # fmt: skip
         self.resolved = {**p, "dt": dt, "relax_every": relax_every}
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
@@ -291,6 +295,7 @@ class QuasiStaticWaveRun(WaveClock):
         out = {"time": self.time, "volume": self.shell.volume(x),
                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
                "unconverged_relaxations": self.coupled.unconverged,
+               "newton_finishes": self.coupled.newton_finishes,
                "round_off_relaxations": self.coupled.round_off_stops}  # fmt: skip
         if self.adaptive:
             out["chemistry_dt_changes"], out["chemistry_dt"] = self.dt_changes, self.wave.dt

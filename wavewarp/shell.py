@@ -43,13 +43,15 @@ GRADIENTS = ("analytic", "autodiff")
 
 class RelaxationError(RuntimeError):
     """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped, `.x` the positions
-    there, `.round_off` whether it stopped because no lower energy could be resolved."""
+    there, `.round_off` whether it stopped because no lower energy could be resolved, `.iterations`
+    how many it took."""
 
-    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False):
+    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False, iterations: int = 0):
         super().__init__(message)
         self.residual = residual
         self.x = x
         self.round_off = round_off
+        self.iterations = iterations
 
 
 class Shell:
@@ -127,6 +129,8 @@ class Shell:
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
         self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
+        self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
+        self.newton_steps = 0  # Newton steps of the last relaxation
         self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
 
     @property
@@ -152,6 +156,7 @@ class Shell:
         """Active reference ā, ā⁻¹, b̄, dω̄ at every quadrature point from control values c."""
         t = self.tables
         self._c_host = None  # the NumPy API's cached c no longer describes the reference
+        self.reference_c = c  # the Newton finish's float64 twin copies it (wavewarp/newton.py)
         wp.launch(
             active_reference_kernel,
             dim=t.n_quadrature_points,
@@ -193,11 +198,12 @@ class Shell:
         wp.launch(volume_kernel, dim=reduction_threads(len(self._moment_terms)), inputs=patch + [1],
                   outputs=[self._moment_terms, self._moments], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
 
-    def _elastic_inputs(self, x: wp.array) -> list:
+    def _elastic_inputs(self, x: wp.array, moduli=None) -> list:
         t = self.tables
+        stretching, bending = self._moduli if moduli is None else moduli
         return [x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle,
                 self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight,
-                self._s(self._moduli[0]), self._s(self._moduli[1]), self._s(self.poisson)]  # fmt: skip
+                self._s(stretching), self._s(bending), self._s(self.poisson)]  # fmt: skip
 
     def energy_device(self, x: wp.array, energy: wp.array) -> None:
         """energy[0] = E(x) at the current reference (float64; differentiable with wp.Tape)."""
@@ -221,10 +227,17 @@ class Shell:
         if self.gradient == "autodiff":
             self._autodiff_forces(x, forces, self._energy if energy is None else energy)
             return
+        self._force_terms(x, forces, energy, None, self.rest_volume, self.volume_penalty)
+
+    def volume_gradient_device(self, x: wp.array, gradient: wp.array) -> None:
+        """gradient = ∂V/∂x: the volume term's forces at pressure -1 (μV = 1/2, V̄ = V + 1), no elastic terms."""
+        self._force_terms(x, gradient, None, (0.0, 0.0), self._volume_of(x) + 1.0, 0.5, contact=False)
+
+    def _force_terms(self, x, forces, energy, moduli, target, penalty, contact: bool = True) -> None:
+        """forces_device with the elastic moduli (None: the shell's) and volume target and penalty given."""
         t = self.tables
-        target, penalty = wp.float64(self.rest_volume), wp.float64(self.volume_penalty)
-        volume = [self._moments, target, penalty]
-        if self.volume_penalty > 0:
+        volume = [self._moments, wp.float64(target), wp.float64(penalty)]
+        if penalty > 0:
             self._launch_volume(x, differentiable=False)  # V for the pressure, S and x̄ for the centroid term
             if not self.deterministic:  # the atomic scatter adds onto the centroid term
                 wp.launch(volume_centroid_forces_kernel, dim=len(forces), inputs=volume, outputs=[forces],
@@ -232,19 +245,20 @@ class Shell:
         elif not self.deterministic:
             forces.zero_()  # the atomic scatter adds; the deterministic gather writes
         wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles,
-                  inputs=self._elastic_inputs(x) + [t.weights, *volume, int(self.deterministic), int(energy is not None)],
+                  inputs=self._elastic_inputs(x, moduli) + [t.weights, *volume, int(self.deterministic),
+                                                            int(energy is not None)],
                   outputs=[self._energy_density, forces, self._jets], device=self.device)  # fmt: skip
         if self.deterministic:
             wp.launch(gather_forces_kernel, dim=self.mesh.n_vertices,
                       inputs=[self._jets, self._vertex_entry_start, self._vertex_entries, self._entry_triangle,
                               t.patch_start, t.triangle_type, t.basis, t.points_per_triangle, *volume],
                       outputs=[forces], device=self.device)  # fmt: skip
-        if self.self_contact is not None:
+        if contact and self.self_contact is not None:
             self.self_contact.add_forces(x, forces, None if energy is None else self._energy_density)
         if energy is not None:
             self._sum(self._energy_density, energy, differentiable=False)
-            if self.volume_penalty > 0:
-                wp.launch(volume_energy_kernel, dim=1, inputs=[self._moments, self.mesh.n_vertices, target, penalty],
+            if penalty > 0:
+                wp.launch(volume_energy_kernel, dim=1, inputs=[self._moments, self.mesh.n_vertices, *volume[1:]],
                           outputs=[energy], device=self.device)  # fmt: skip
 
     def _autodiff_forces(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:
@@ -301,13 +315,17 @@ class Shell:
         """Y h ℓ̄: the force on a vertex from a unit strain over one mean control edge ℓ̄."""
         return self.young * self.thickness * self.edge_length
 
-    def relax(self, x0, c=0.0, tol=None, max_iterations=20000, callback=None) -> np.ndarray:
+    def relax(self, x0, c=0.0, tol=None, max_iterations=20000, callback=None, method="auto",
+              newton_steps=50) -> np.ndarray:  # fmt: skip
         """Quasi-static equilibrium from x0 under concentrations c (SPEC §3).
 
         Stops when max_I |F_I| <= tol · Y h ℓ̄ (tol is a strain-like number; default 1e-5 in
-        float32, ten times its measured round-off floor, and 1e-9 in float64). Preconditioned nonlinear conjugate gradients with an
-        Armijo line search, so the energy falls monotonically (docs/shell.md). Raises
-        RelaxationError saying how far it got when it does not converge.
+        float32, ten times its measured round-off floor, and 1e-9 in float64). `method`: "ncg",
+        preconditioned nonlinear conjugate gradients with an Armijo line search (at most
+        `max_iterations`); "newton", Levenberg–Marquardt Newton steps on the sparse Hessian (at
+        most `newton_steps`); "auto", CG, and Newton from where CG stopped if it spent its budget
+        (docs/shell.md). The energy falls monotonically. Raises RelaxationError saying how far it
+        got when it does not converge.
         """
         from .relax import relax
 
@@ -315,7 +333,7 @@ class Shell:
             tol = 1e-5 if self.scalar == wp.float32 else 1e-9
         tol = positive("tol", tol)
         xw = self._set(x0, c, search=False)
-        return relax(self, xw, tol, int(max_iterations), callback)
+        return relax(self, xw, tol, int(max_iterations), callback, method=method, newton_steps=int(newton_steps))
 
 
 def _vertex_entries(host, n_vertices: int):

@@ -1,0 +1,116 @@
+"""The Newton finish of a relaxation (wavewarp/newton.py, docs/shell.md "Newton finish")."""
+
+import numpy as np
+import pytest
+from test_shell import sphere_stretch
+
+from wavewarp.coupled import QuasiStatic
+from wavewarp.geometry import limit_positions
+from wavewarp.laplace import LaplaceBeltrami
+from wavewarp.mesh import icosphere
+from wavewarp.newton import NewtonFinish, distance_two_colouring, patch_pairs
+from wavewarp.relax import ROUND_OFF_SLACK
+from wavewarp.self_contact import SelfContact
+from wavewarp.shell import RelaxationError, Shell
+from wavewarp.waves import Telegraph
+
+F64 = dict(dtype="float64")
+
+
+def front(mesh):
+    return 0.5 + 0.5 * np.tanh(4 * mesh.vertices[:, 2] / np.abs(mesh.vertices).max())
+
+
+def central_difference_hessian_action(shell, x, c, v, step=1e-6):
+    """H v = -(F(x + εv) - F(x - εv)) / 2ε from the shell's own forces: the independent reference."""
+    return (-(shell.forces(x + step * v, c) - shell.forces(x - step * v, c)) / (2 * step)).ravel()
+
+
+def test_colouring_leaves_no_force_row_with_two_vertices_of_one_colour():
+    shell = Shell(icosphere(1.0, 2), 0.05, 1.0, device="cpu", **F64)
+    pattern = patch_pairs(shell.tables.host, shell.mesh.n_vertices)
+    colour = distance_two_colouring(pattern)
+    for row in range(pattern.shape[0]):
+        members = colour[pattern.indices[pattern.indptr[row] : pattern.indptr[row + 1]]]
+        assert len(np.unique(members)) == len(members)
+    assert pattern.nnz == pattern.T.nnz and (pattern != pattern.T).nnz == 0
+
+
+@pytest.mark.parametrize("volume_penalty", [0.0, 0.5])
+def test_coloured_hessian_equals_central_differences_of_the_forces(rng, device, volume_penalty):
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, 0.05, 1.0, AC=0.5, AI=0.8, volume_penalty=volume_penalty, device=device, **F64)
+    c = rng.uniform(0.0, 0.6, mesh.n_vertices)
+    x = 0.95 * mesh.vertices + 0.01 * rng.normal(size=mesh.vertices.shape)
+    shell.forces(x, c)  # sets the reference
+    h, w, coupling = NewtonFinish(shell).hessian(x)
+    assert abs(h - h.T).max() == 0.0 and (volume_penalty > 0) == bool(coupling.any())
+    for v in [rng.normal(size=x.shape) for _ in range(3)] + [x]:  # x: the volume's own direction
+        reference = central_difference_hessian_action(shell, x, c, v)
+        action = h @ v.ravel() + w @ (coupling @ (w.T @ v.ravel()))
+        # with volume, 2μV (V − V̄) ∇²(x̄·S) stays out: S = ⅓∫ n dω is zero up to quadrature (docs/shell.md)
+        bound = 1e-7 if volume_penalty == 0 else 1e-3
+        assert np.abs(action - reference).max() <= bound * np.abs(reference).max()
+
+
+def test_newton_reaches_the_closed_form_radius_quadratically():
+    R, h, penalty = 2.0, 0.2, 0.4 * 0.2 / 2.0**4
+    lam = sphere_stretch(0.5, 0.3, h, R, penalty)
+    mesh = icosphere(R, 3)
+    shell = Shell(mesh, h, 1.0, AC=0.5, AI=0.3, volume_penalty=penalty, device="cpu", **F64)
+    residuals = []
+    x = shell.relax(mesh.vertices, 1.0, method="newton", callback=lambda i, e, r: residuals.append(r))
+    radius = np.linalg.norm(limit_positions(mesh, x, device="cpu", **F64), axis=1).mean() / R
+    assert abs(radius - lam) < 1e-3 * abs(1 - lam)  # the same bound as CG's test at level 3 (test_shell.py)
+    assert shell.newton_steps == len(residuals) <= 15 and residuals[-1] <= 1e-9
+    assert residuals[2] <= 10 * residuals[1] ** 2  # quadratic from 1e-3 down (docs/shell.md)
+    assert np.all(np.diff(shell.relax_history) <= 1e-12 * abs(shell.relax_history[0]))
+
+
+def test_auto_finishes_with_newton_where_cg_spends_its_budget():
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, 0.05, 1.0, AC=0.3, AI=0.4, volume_penalty=0.5, device="cpu", **F64)
+    c = front(mesh)
+    reference = shell.relax(mesh.vertices, c, tol=1e-11, method="ncg")  # CG alone, with budget to spare
+    with pytest.raises(RelaxationError, match="after 20 iterations"):
+        shell.relax(mesh.vertices, c, tol=1e-11, max_iterations=20, method="ncg")
+    x = shell.relax(mesh.vertices, c, tol=1e-11, max_iterations=20)  # auto
+    history = np.array(shell.relax_history)
+    assert shell.newton_steps > 0 and len(history) == 21 + shell.newton_steps
+    assert np.all(np.diff(history) <= 1e-12 * abs(history[0]))  # monotone across the hand-over
+    assert np.linalg.norm(shell.forces(x, c), axis=1).max() / shell.force_scale() <= 1e-11
+    assert np.abs(x - reference).max() < 1e-7
+
+
+def test_a_float32_shell_is_finished_on_a_float64_twin():
+    mesh = icosphere(1.0, 2)
+    c = front(mesh)
+    parts = dict(thickness=0.05, young=1.0, AC=0.3, AI=0.4, volume_penalty=0.5, device="cpu")
+    reference = Shell(mesh, **parts, **F64).relax(mesh.vertices, c, tol=1e-10)
+    shell = Shell(mesh, **parts, dtype="float32")
+    x = shell.relax(mesh.vertices, c, max_iterations=5)  # auto; tol 1e-5
+    assert shell.newton_steps > 0
+    assert np.linalg.norm(shell.forces(x, c), axis=1).max() / shell.force_scale() <= ROUND_OFF_SLACK * 1e-5
+    assert np.abs(x - reference).max() < 1e-4
+
+
+def test_quasi_static_counts_the_newton_finishes():
+    mesh = icosphere(1.0, 2)
+    c0 = np.full(mesh.n_vertices, 1.0)
+    shell = Shell(mesh, thickness=0.05, young=1.0, AC=0.3, AI=0.5, **F64)
+    run = QuasiStatic(shell, Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3)
+    assert run.newton_finishes == 1 and run.unconverged == 0
+    assert np.linalg.norm(shell.forces(run.positions(), c0), axis=1).max() / shell.force_scale() <= run.tol
+
+
+def test_newton_refuses_self_contact_autodiff_and_unknown_methods():
+    mesh = icosphere(1.0, 3)
+    shell = Shell(mesh, 0.05, 1.0, AI=0.5, device="cpu", **F64)
+    with pytest.raises(ValueError, match="method must be one of ncg, newton, auto"):
+        shell.relax(mesh.vertices, 0.5, method="bfgs")
+    shell.self_contact = SelfContact(shell)
+    with pytest.raises(ValueError, match="does not support self-contact"):
+        shell.relax(mesh.vertices, 0.5, method="newton")
+    autodiff = Shell(icosphere(1.0, 1), 0.05, 1.0, AI=0.5, gradient="autodiff", device="cpu", **F64)
+    with pytest.raises(ValueError, match="needs the analytic forces"):
+        autodiff.relax(autodiff.mesh.vertices, 0.5, method="newton")
