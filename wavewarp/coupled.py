@@ -25,7 +25,7 @@ import warp as wp
 from . import kernels
 from .checks import count
 from .laplace import LaplaceBeltrami
-from .relax import METHODS, ROUND_OFF_SLACK, relax
+from .relax import ROUND_OFF_SLACK, checked_method, relax
 from .device import run_steps
 from .kernels.dynamics import reference_ramp_kernel
 from .shell import RelaxationError, Shell
@@ -64,9 +64,7 @@ class QuasiStatic:
             tol = 1e-5 if shell.scalar == wp.float32 else 1e-9
         self.tol = float(tol)
         self.max_iterations = count("max_iterations", max_iterations, 1)
-        if method not in METHODS:
-            raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-        self.method, self.newton_steps = method, count("newton_steps", newton_steps, 1)
+        self.method, self.newton_steps = checked_method(method), count("newton_steps", newton_steps, 1)
         self.newton_finishes = 0  # relaxations that Newton steps finished
         self.overdamped = bool(overdamped)
         self.unconverged = 0  # overdamped relaxations that used their whole iteration budget

@@ -24,10 +24,10 @@ import scipy.sparse.linalg as sparse_linalg
 import warp as wp
 
 from .kernels.newton import hessian_columns_kernel, perturb_kernel
+from .relax import ENERGY_NOISE
 
 # relative central-difference step: its round-off (1e-16 / STEP) and truncation (STEP²) errors are both ~1e-10
 DIFFERENCE_STEP = 1e-6
-ENERGY_NOISE = 1e-12  # float64 energy sums
 MAX_SHIFT_TRIES = 40  # LM shift increases before the step gives up (round-off floor)
 
 
@@ -42,15 +42,15 @@ def patch_pairs(host, n_vertices: int) -> sparse.csr_matrix:
         rows.append(np.repeat(patches, size, axis=1).ravel())
         columns.append(np.tile(patches, (1, size)).ravel())
     rows, columns = np.concatenate(rows), np.concatenate(columns)
-    pattern = sparse.csr_matrix((np.ones(len(rows), dtype=np.int8), (rows, columns)), shape=(n_vertices, n_vertices))
-    pattern.sum_duplicates()
+    pattern = sparse.csr_matrix((np.ones(len(rows), dtype=np.int32), (rows, columns)), shape=(n_vertices, n_vertices))
+    pattern.data[:] = 1  # the duplicates were summed: a pair counts once
     pattern.sort_indices()
     return pattern
 
 
 def distance_two_colouring(pattern: sparse.csr_matrix) -> np.ndarray:
     """Greedy colours such that no row of `pattern` holds two vertices of one colour."""
-    square = (pattern.astype(np.int32) @ pattern.astype(np.int32)).tocsr()
+    square = (pattern @ pattern).tocsr()
     colour = np.full(pattern.shape[0], -1, dtype=np.int32)
     for i in range(pattern.shape[0]):
         used = colour[square.indices[square.indptr[i] : square.indptr[i + 1]]]
@@ -168,7 +168,7 @@ class NewtonFinish:
                 trial_residual = float(np.linalg.norm(trial_forces, axis=1).max()) / scale
                 drop = energy - trial_energy
                 if predicted > 0 and drop >= 1e-4 * predicted or (
-                    abs(drop) <= ENERGY_NOISE * abs(energy) and trial_residual < residual
+                    abs(drop) <= ENERGY_NOISE[wp.float64] * abs(energy) and trial_residual < residual
                 ):
                     break
                 shift *= 8.0

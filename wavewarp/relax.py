@@ -197,6 +197,13 @@ class Relaxation:
         )  # fmt: skip
 
 
+def checked_method(method: str) -> str:
+    """`method` if it is one of METHODS, else ValueError listing them."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    return method
+
+
 def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None,
           method: str = "ncg", newton_steps: int = 50):  # fmt: skip
     """Relax `shell` from positions x (device array) by `method` (Shell.relax); the shell keeps its
@@ -208,8 +215,7 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
     """
     from .shell import RelaxationError
 
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    checked_method(method)
     if method == "newton":
         return _newton(shell, x.numpy().astype(np.float64), tol, newton_steps, callback, out, [], 0)
     try:
