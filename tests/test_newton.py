@@ -67,6 +67,40 @@ def test_newton_reaches_the_closed_form_radius_quadratically():
     assert np.all(np.diff(shell.relax_history) <= 1e-12 * abs(shell.relax_history[0]))
 
 
+def test_a_later_relaxation_reuses_the_factorization_as_a_preconditioner():
+    """Newton's next relaxation (c = 1 → 1.05) solves its steps by CG on the exact Hessian action,
+    preconditioned by the first relaxation's factorization, and reaches the closed-form radius."""
+    R, h, penalty = 2.0, 0.2, 0.4 * 0.2 / 2.0**4
+    mesh = icosphere(R, 3)
+    shell = Shell(mesh, h, 1.0, AC=0.5, AI=0.3, volume_penalty=penalty, device="cpu", **F64)
+    x = shell.relax(mesh.vertices, 1.0, method="newton")
+    finish = shell._newton
+    factored = finish.factorizations
+    x = shell.relax(x, 1.05, method="newton")
+    assert shell.newton_steps > 0 and finish.factorizations == factored and finish.krylov_steps >= shell.newton_steps
+    lam = sphere_stretch(0.5, 0.3, h, R, penalty, c=1.05)
+    radius = np.linalg.norm(limit_positions(mesh, x, device="cpu", **F64), axis=1).mean() / R
+    assert abs(radius - lam) < 1e-3 * abs(1 - lam)
+    assert np.linalg.norm(shell.forces(x, 1.05), axis=1).max() / shell.force_scale() <= 1e-9
+    assert np.all(np.diff(shell.relax_history) <= 1e-12 * abs(shell.relax_history[0]))
+
+
+def test_a_factorization_that_does_not_precondition_is_replaced():
+    """A preconditioner that is not positive definite stops the Krylov step at once; the step
+    factors the current Hessian instead and the relaxation converges as before."""
+    mesh = icosphere(1.0, 2)
+    shell = Shell(mesh, 0.05, 1.0, AC=0.3, AI=0.4, volume_penalty=0.5, device="cpu", **F64)
+    c = front(mesh)
+    reference = shell.relax(mesh.vertices, c, tol=1e-11, method="ncg")
+    shell.relax(mesh.vertices, 0.5 * c, method="newton")
+    finish = shell._newton
+    finish.inverse.solve = lambda f: -f  # negative definite: r·z < 0 at the first iteration
+    factored, solved = finish.factorizations, finish.krylov_steps
+    x = shell.relax(mesh.vertices, c, tol=1e-11, method="newton")
+    assert finish.factorizations > factored and finish.krylov_steps >= solved
+    assert np.abs(x - reference).max() < 1e-7
+
+
 def test_auto_finishes_with_newton_where_cg_spends_its_budget():
     mesh = icosphere(1.0, 2)
     shell = Shell(mesh, 0.05, 1.0, AC=0.3, AI=0.4, volume_penalty=0.5, device="cpu", **F64)

@@ -25,7 +25,7 @@ import warp as wp
 from . import kernels
 from .checks import count
 from .laplace import LaplaceBeltrami
-from .relax import ROUND_OFF_SLACK, checked_method, relax
+from .relax import NEWTON_STEPS, ROUND_OFF_SLACK, checked_method, relax
 from .device import run_steps
 from .kernels.dynamics import reference_ramp_kernel
 from .shell import RelaxationError, Shell
@@ -46,7 +46,7 @@ class QuasiStatic:
 
     def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
                  x0=None, max_iterations: int = 20000, overdamped: bool = False, method: str = "auto",
-                 newton_steps: int = 50):  # fmt: skip
+                 newton_steps: int = NEWTON_STEPS):  # fmt: skip
         if not isinstance(shell, Shell):
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         if not isinstance(wave, _Stepper):

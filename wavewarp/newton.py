@@ -14,6 +14,8 @@ entry). Newton's convergence is therefore quadratic down to residuals ~1e-6 and 
 ~0.1 per step) below. Every step is checked on the energy, so the
 energy still falls monotonically. A float32 shell is finished on a float64 twin (a float32
 Hessian by differences is too coarse), and its own residual at the result is its round-off floor.
+The last factorization is kept: a step first tries CG on the exact Hessian action preconditioned by
+it, and factors anew only where that fails (across steps, shifts and relaxations).
 """
 
 from __future__ import annotations
@@ -29,6 +31,9 @@ from .relax import ENERGY_NOISE
 # relative central-difference step: its round-off (1e-16 / STEP) and truncation (STEP²) errors are both ~1e-10
 DIFFERENCE_STEP = 1e-6
 MAX_SHIFT_TRIES = 40  # LM shift increases before the step gives up (round-off floor)
+# a step first tries CG preconditioned by the last factorization; this many iterations to this
+# relative residual, or the Hessian is factored anew
+KRYLOV_ITERATIONS, KRYLOV_TOL = 25, 1e-4
 
 
 def patch_pairs(host, n_vertices: int) -> sparse.csr_matrix:
@@ -103,6 +108,9 @@ class NewtonFinish:
             self.forces_plus, self.forces_minus = wp.zeros(n, dtype=wp.vec3d), wp.zeros(n, dtype=wp.vec3d)
             self.gradient = wp.zeros(n, dtype=wp.vec3d)
             self.energy = wp.zeros(1, dtype=wp.float64)
+        # the last factorization and LM shift, kept across steps and relaxations (a preconditioner)
+        self.inverse, self.shift = None, None
+        self.factorizations = self.krylov_steps = 0
 
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(E, F) at positions x (float64 NumPy)."""
@@ -135,6 +143,14 @@ class NewtonFinish:
         h = sparse.bsr_matrix((self.blocks.numpy(), self.indices, self.indptr), shape=(3 * n, 3 * n)).tocsr()
         return 0.5 * (h + h.T), g.reshape(-1, 1), np.array([[2 * mu]])
 
+    def hessian_action(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """H v at x (flat, float64) by central differences of the forces: the exact Hessian's action,
+        the volume about the centroid included."""
+        step = DIFFERENCE_STEP * self.work.edge_length / max(float(np.abs(v).max()), 1e-300)
+        shift = (step * v).reshape(-1, 3)
+        plus, minus = self.evaluate(x + shift)[1], self.evaluate(x - shift)[1]
+        return (minus - plus).ravel() / (2 * step)
+
     def run(self, x0: np.ndarray, tol: float, max_steps: int, callback=None, iteration: int = 0):
         """Newton steps from x0 until max |F| <= tol · Y h ℓ̄ (in float64). Returns (x, status,
         residual, energies); status "converged", "budget" or "round-off"."""
@@ -151,18 +167,22 @@ class NewtonFinish:
         x = np.asarray(x0, dtype=np.float64).copy()
         energy, forces = self.evaluate(x)
         residual = float(np.linalg.norm(forces, axis=1).max()) / scale
-        energies, shift = [energy], None
+        energies = [energy]
+        self.shift = None if self.inverse is None else 1e-8 * self.inverse.scale
         for step in range(max_steps):
             if residual <= tol:
                 return x, "converged", residual, energies
-            h, w, coupling = self.hessian(x)
-            diagonal = float(np.abs(h.diagonal()).mean())
-            shift = 1e-8 * diagonal if shift is None else shift
-            rigid, f = rigid_modes(x), forces.ravel()
+            hessian, rigid, f = None, rigid_modes(x), forces.ravel()
             for _ in range(MAX_SHIFT_TRIES):
-                d = _shifted_solve(h, w, coupling, shift, f)
-                d -= rigid.T @ (rigid @ d)
-                predicted = f @ d - 0.5 * d @ (h @ d + w @ (coupling @ (w.T @ d)))
+                d = None if self.inverse is None else self._krylov_step(x, f, rigid)
+                if d is None:  # no factorization yet, or it no longer preconditions: factor H(x) + shift I
+                    hessian = self.hessian(x) if hessian is None else hessian
+                    self.inverse = ShiftedInverse(*hessian, self.shift)
+                    self.shift = self.inverse.shift
+                    self.factorizations += 1
+                    d = self.inverse.solve(f)
+                    d -= rigid.T @ (rigid @ d)
+                predicted = f @ d - 0.5 * d @ self.hessian_action(x, d)
                 trial = x + d.reshape(-1, 3)
                 trial_energy, trial_forces = self.evaluate(trial)
                 trial_residual = float(np.linalg.norm(trial_forces, axis=1).max()) / scale
@@ -171,25 +191,61 @@ class NewtonFinish:
                     abs(drop) <= ENERGY_NOISE[wp.float64] * abs(energy) and trial_residual < residual
                 ):
                     break
-                shift *= 8.0
+                self.shift *= 8.0
             else:
                 return x, "round-off", residual, energies
             if predicted > 0 and drop >= 0.75 * predicted:
-                shift = max(shift / 8.0, 1e-12 * diagonal)
+                self.shift = max(self.shift / 8.0, 1e-12 * self.inverse.scale)
             x, energy, forces, residual = trial, trial_energy, trial_forces, trial_residual
             energies.append(energy)
             if callback is not None:
                 callback(iteration + step + 1, energy, residual)
         return x, ("converged" if residual <= tol else "budget"), residual, energies
 
+    def _krylov_step(self, x: np.ndarray, f: np.ndarray, rigid: np.ndarray) -> np.ndarray | None:
+        """(H(x) + shift I) d = f by CG on the exact Hessian action, preconditioned by the last
+        factorization (of an earlier x, shift or relaxation), in the complement of the rigid modes;
+        None where that does not solve it to KRYLOV_TOL within KRYLOV_ITERATIONS (or meets negative
+        curvature): the caller factors H(x) anew."""
 
-def _shifted_solve(h: sparse.csr_matrix, w: np.ndarray, coupling: np.ndarray, shift: float,
-                   f: np.ndarray) -> np.ndarray:  # fmt: skip
-    """(H + W C Wᵀ + shift I)⁻¹ f by sparse LU and Woodbury (its form without C⁻¹: C may be singular)."""
-    lu = sparse_linalg.splu((h + shift * sparse.identity(h.shape[0], format="csr")).tocsc())
-    y = lu.solve(f)
-    if not coupling.any():
-        return y
-    z = lu.solve(w)
-    capacitance = np.eye(len(coupling)) + coupling @ (w.T @ z)
-    return y - z @ np.linalg.solve(capacitance, coupling @ (w.T @ y))
+        def project(v):
+            return v - rigid.T @ (rigid @ v)
+
+        d, r = np.zeros_like(f), project(f)
+        z = project(self.inverse.solve(r))
+        p, rz, target = z.copy(), r @ z, KRYLOV_TOL * np.linalg.norm(r)
+        for _ in range(KRYLOV_ITERATIONS):
+            q = project(self.hessian_action(x, p) + self.shift * p)
+            curvature = p @ q
+            if not (curvature > 0 and rz > 0):
+                return None
+            alpha = rz / curvature
+            d += alpha * p
+            r -= alpha * q
+            if np.linalg.norm(r) <= target:
+                self.krylov_steps += 1
+                return d
+            z = project(self.inverse.solve(r))
+            rz, rz_old = r @ z, rz
+            p = z + (rz / rz_old) * p
+        return None
+
+
+class ShiftedInverse:
+    """(H + W C Wᵀ + shift I)⁻¹ by sparse LU and Woodbury (its form without C⁻¹: C may be singular)."""
+
+    def __init__(self, h: sparse.csr_matrix, w: np.ndarray, coupling: np.ndarray, shift: float | None):
+        """shift None: 1e-8 × the mean |diagonal| (the first LM shift)."""
+        self.scale = float(np.abs(h.diagonal()).mean())
+        self.shift = 1e-8 * self.scale if shift is None else shift
+        self.lu = sparse_linalg.splu((h + self.shift * sparse.identity(h.shape[0], format="csr")).tocsc())
+        self.w, self.coupling = w, coupling
+        if coupling.any():
+            self.z = self.lu.solve(w)
+            self.capacitance = np.eye(len(coupling)) + coupling @ (w.T @ self.z)
+
+    def solve(self, f: np.ndarray) -> np.ndarray:
+        y = self.lu.solve(f)
+        if not self.coupling.any():
+            return y
+        return y - self.z @ np.linalg.solve(self.capacitance, self.coupling @ (self.w.T @ y))

@@ -46,6 +46,9 @@ from .kernels.relax import (
 METHODS = ("ncg", "newton", "auto")
 # a CG stop at the round-off floor within this factor of tol is the dtype's floor: Newton cannot help
 ROUND_OFF_SLACK = 10.0
+# Newton steps a finish may take: every step lowers the energy, and a snap-through to a distant
+# equilibrium took 132–137 (docs/shell.md "Newton finish")
+NEWTON_STEPS = 500
 # relative round-off of the energy sum (float64 accumulation of float32 or float64 terms)
 ENERGY_NOISE = {wp.float32: 1e-7, wp.float64: 1e-12}
 
@@ -205,7 +208,7 @@ def checked_method(method: str) -> str:
 
 
 def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, out: wp.array | None = None,
-          method: str = "ncg", newton_steps: int = 50):  # fmt: skip
+          method: str = "ncg", newton_steps: int = NEWTON_STEPS):  # fmt: skip
     """Relax `shell` from positions x (device array) by `method` (Shell.relax); the shell keeps its
     Relaxation and NewtonFinish (buffers, graph, Hessian pattern). Returns the positions (NumPy), or
     writes them to the device array `out` and returns None.

@@ -117,8 +117,10 @@ TELEGRAPH_PARAMETERS = {
     "relax_every": Param(0, "chemistry steps per relaxation; 0 = as many as keep the wave within half a "
                          "control edge between relaxations (quasi-static: τ_mech ≪ τ_wave)", minimum=0),  # fmt: skip
     "relax_tol": Param(0.0, "relaxation tolerance (a residual strain, Shell.relax); 0 = the dtype's default", minimum=0.0),
-    "relax_iterations": Param(20000, "CG iteration budget per relaxation; where CG spends it, Newton steps finish "
-                              "(relax_method auto)", minimum=1),  # fmt: skip
+    "relax_iterations": Param(0, "CG iteration budget per relaxation; where CG spends it, Newton steps finish "
+                              "(relax_method auto); 0 = 2,000 on a CPU, 20,000 on a GPU, where a CG iteration costs "
+                              "~1/6 as much against the same host factorization (docs/shell.md)", minimum=0),  # fmt: skip
+    "newton_steps": Param(500, "Newton steps a finish may take (a snap-through took 132–137)", minimum=1),
     "relax_method": Param("auto", "auto: CG, then a Newton finish where CG spends its budget (the late oocytes' "
                           "nearly singular Hessian, docs/shell.md); ncg: CG only; newton: Newton only",
                           choices=("auto", "ncg", "newton")),  # fmt: skip
@@ -159,6 +161,10 @@ class WaveClock:
         return self.wave.steps
 
 
+# relax_iterations 0: CG's budget before the Newton finish, by device (is_cuda). Measured on the
+# default ascidian: a CPU finish after 2,000 takes ~20 s where CG to 20,000 took ~190 s; on the H100
+# the float32 run kept 26 frames in 311 s with 20,000 and 22 in 559 s with 2,000 (docs/shell.md)
+CG_BUDGET = {False: 2000, True: 20000}
 UNRESOLVED_MASS_GROWTH = 50.0  # a vertex's lumped mass over its rest value past which a blow-up is named a fold
 # sharper than the mesh (level-4 buckling, H100: at most 5.5× over its 3-fold fold to t = 15.2, ~1000× at the blow-up)
 
@@ -197,10 +203,11 @@ class QuasiStaticWaveRun(WaveClock):
         relax_every = p["relax_every"] or max(1, int(0.5 * mean_edge(mesh) / (p["gamma"] * dt)))
         self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p["frames"] / (relax_every * dt)))
         self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
+        budget = p["relax_iterations"] or CG_BUDGET[self.shell.device.is_cuda]
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
-                                   tol=p["relax_tol"] or None, max_iterations=p["relax_iterations"],
-                                   overdamped=p["overdamped"], method=p["relax_method"])  # fmt: skip
-        self.resolved = {**p, "dt": dt, "relax_every": relax_every}
+                                   tol=p["relax_tol"] or None, max_iterations=budget, overdamped=p["overdamped"],
+                                   method=p["relax_method"], newton_steps=p["newton_steps"])  # fmt: skip
+        self.resolved = {**p, "dt": dt, "relax_every": relax_every, "relax_iterations": budget}
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
         # adaptive_dt: below a bound that the moving surface lowered, step at safety × the bound,
