@@ -36,6 +36,7 @@ from .kernels.shell import (
     volume_kernel,
 )
 from .mesh import Mesh
+from .relax import NEWTON_STEPS, relax
 
 MODELS = {"koiter": 0, "bilayer": 1}
 GRADIENTS = ("analytic", "autodiff")
@@ -316,20 +317,17 @@ class Shell:
         return self.young * self.thickness * self.edge_length
 
     def relax(self, x0, c=0.0, tol=None, max_iterations=20000, callback=None, method="auto",
-              newton_steps=None) -> np.ndarray:  # fmt: skip
+              newton_steps=NEWTON_STEPS) -> np.ndarray:  # fmt: skip
         """Quasi-static equilibrium from x0 under concentrations c (SPEC §3).
 
         Stops when max_I |F_I| <= tol · Y h ℓ̄ (tol is a strain-like number; default 1e-5 in
         float32, ten times its measured round-off floor, and 1e-9 in float64). `method`: "ncg",
         preconditioned nonlinear conjugate gradients with an Armijo line search (at most
         `max_iterations`); "newton", Levenberg–Marquardt Newton steps on the sparse Hessian (at
-        most `newton_steps`, default 500); "auto", CG, and Newton from where CG stopped if it spent its budget
-        (docs/shell.md). The energy falls monotonically. Raises RelaxationError saying how far it
-        got when it does not converge.
+        most `newton_steps`); "auto", CG, and Newton from where CG stopped if it spent its
+        budget (docs/shell.md). The energy falls monotonically. Raises RelaxationError saying how
+        far it got when it does not converge.
         """
-        from .relax import NEWTON_STEPS, relax
-
-        newton_steps = NEWTON_STEPS if newton_steps is None else newton_steps
         if tol is None:
             tol = 1e-5 if self.scalar == wp.float32 else 1e-9
         tol = positive("tol", tol)
