@@ -108,7 +108,8 @@ TELEGRAPH_PARAMETERS = {
     "gamma": Param(1.0, "wave speed γ; with the size it sets the time unit", positive=True),
     "alpha": Param(0.001, "telegraph dissipation α (SPEC §5)", minimum=0.0),
     "dt": Param(0.0, "time step; 0 = 0.4 × the rest surface's stability bound (room for the contraction "
-                "the wave drives: e^{-AC c} shrinks lengths, and the guard refuses dt past the moving bound)",
+                "the wave drives: e^{-AC c} shrinks lengths, and the guard refuses dt past the moving bound), "
+                "then adjusted (at most 5% up, else down) so that the last frame lands on t_end",
                 minimum=0.0),  # fmt: skip
     "frames": Param(48, "frames written between t = 0 and t_end", minimum=1),
     "sensitive": Param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)"),
@@ -198,16 +199,21 @@ class QuasiStaticWaveRun(WaveClock):
             c0, v0 = steady_front(self.operator, origin, k=initial["k"], delta=initial["delta"], gamma=p["gamma"])
         probe = Telegraph(self.operator, p["gamma"], p["alpha"], c0=c0, mass_corrections=p["mass_corrections"])
         dt = p["dt"] or 0.4 * probe.stable_dt
+        relax_every = p["relax_every"] or max(1, int(0.5 * mean_edge(mesh) / (p["gamma"] * dt)))
+        # (1e-9: a resumed run's stored dt and frames give back the same layout despite round-off)
+        self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p["frames"] / (relax_every * dt) - 1e-9))
+        self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
+        if not p["dt"]:  # the automatic step lands the last frame on t_end: stretched by at most 5%, else shrunk
+            if t_end / (self.steps_per_frame * dt) > 1.05 * self.frames:
+                self.frames += 1
+            dt = t_end / (self.frames * self.steps_per_frame)
         self.wave = Telegraph(self.operator, p["gamma"], p["alpha"], c0=c0, v0=v0, dt=dt,
                               mass_corrections=p["mass_corrections"])  # fmt: skip
-        relax_every = p["relax_every"] or max(1, int(0.5 * mean_edge(mesh) / (p["gamma"] * dt)))
-        self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p["frames"] / (relax_every * dt)))
-        self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
         budget = p["relax_iterations"] or CG_BUDGET[self.shell.device.is_cuda]
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
                                    tol=p["relax_tol"] or None, max_iterations=budget, overdamped=p["overdamped"],
                                    method=p["relax_method"], newton_steps=p["newton_steps"])  # fmt: skip
-        self.resolved = {**p, "dt": dt, "relax_every": relax_every, "relax_iterations": budget}
+        self.resolved = {**p, "dt": dt, "relax_every": relax_every, "frames": self.frames, "relax_iterations": budget}
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
         # adaptive_dt: below a bound that the moving surface lowered, step at safety × the bound,
