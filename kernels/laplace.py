@@ -3,7 +3,10 @@
 Subdivision (one thread per quadrature point q of triangle t, patch vertices k):
 
     M_I = Σ_q N_I j w_q                       (lumped mass, ∫ N_I dω)
-    (K c)_I = Σ_q N_I,α D^{αβ} c,β           D = a^{-1} j w_q = adj(a) w_q / j
+    (K c)_I = Σ_q N_I,α D^{αβ} c,β           D = a^{-1} j w_q = adj(a) w_q / max(j, j_floor)
+
+j_floor (a hundredth of the rest j) only acts where the limit surface is singular: a fold sharper
+than the mesh, where the tangents turn parallel and D would grow as 1/j (docs/chemistry.md).
 
 `surface_metric_kernel` computes D and M whenever the positions change; `stiffness_kernel`
 then only gathers c,β over the patch and scatters N_I,α D^{αβ} c,β with atomics.
@@ -63,11 +66,12 @@ def surface_metric_kernel(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
+    j_floor: wp.array(dtype=Any),
     flux_metric: wp.array(dtype=Any),
     area: wp.array(dtype=Any),
     mass: wp.array(dtype=Any),
 ):
-    """D = a^{-1} dω and dω at q; M_I += N_I dω (mass zeroed by the caller)."""
+    """D = adj(a) w / max(j, j_floor) and dω = j w at q; M_I += N_I dω (mass zeroed by the caller)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
     a1, a2 = patch_tangents(x, patch_start, patch_vertices, basis, t, row)
@@ -76,7 +80,7 @@ def surface_metric_kernel(
     a22 = wp.dot(a2, a2)
     j = wp.length(wp.cross(a1, a2))
     w = weights[q % points_per_triangle]
-    s = w / j
+    s = w / wp.max(j, j_floor[q])
     flux_metric[q] = wp.matrix(a22 * s, -a12 * s, -a12 * s, a11 * s, shape=(2, 2))
     dw = j * w
     area[q] = dw
@@ -396,8 +400,8 @@ def assembled_diagonal_kernel(row_start: wp.array(dtype=wp.int32), values: wp.ar
 
 
 _PATCH = dict(basis="vec6[,]")
-declare_overloads(surface_metric_kernel, x="vec3[]", weights="scalar[]", flux_metric="mat22[]", area="scalar[]", mass="scalar[]",
-                  **_PATCH)  # fmt: skip
+declare_overloads(surface_metric_kernel, x="vec3[]", weights="scalar[]", j_floor="scalar[]", flux_metric="mat22[]",
+                  area="scalar[]", mass="scalar[]", **_PATCH)  # fmt: skip
 declare_overloads(consistent_mass_kernel, c="scalar[]", area="scalar[]", out="scalar[]", **_PATCH)
 declare_overloads(stiffness_kernel, c="scalar[]", flux_metric="mat22[]", out="scalar[]", **_PATCH)
 declare_overloads(stiffness_diagonal_kernel, flux_metric="mat22[]", diagonal="scalar[]", **_PATCH)

@@ -188,6 +188,31 @@ def test_update_accepts_device_positions_and_counts_versions():
     assert op.area == pytest.approx(4 * np.pi * 4.0, rel=1e-3)
 
 
+@pytest.mark.parametrize("squash, floored", [(0.5, False), (1e-4, True)])
+def test_flux_metric_keeps_its_area_element_above_a_hundredth_of_the_rest_one(squash, floored):
+    """D = adj(a) w / max(j, j_floor), j_floor = J_FLOOR × rest j, against the metric of the
+    geometry module (an independent path). An ellipsoid (z × 0.5) never reaches the floor: D is the
+    plain a⁻¹ dω. Squashed flat (z × 1e-4) the rim's tangents turn parallel (j → 0, a singular
+    limit surface): there D would grow as 1/j, and the floor caps it; K stays symmetric with K·1 = 0."""
+    from wavewarp.laplace import J_FLOOR
+
+    mesh = icosphere(1.0, 3)
+    x = mesh.vertices * np.array([1.0, 1.0, squash])
+    op = LaplaceBeltrami(mesh, x, **F64)
+    rest, moved = limit_surface(mesh, **F64), limit_surface(mesh, x, **F64)
+    j_rest = np.sqrt(np.linalg.det(rest.metric))  # well conditioned at rest; the squashed j from dω = j w
+    w = rest.area / j_rest
+    j = moved.area / w
+    a = moved.metric
+    adj = np.stack([np.stack([a[:, 1, 1], -a[:, 0, 1]], -1), np.stack([-a[:, 1, 0], a[:, 0, 0]], -1)], -2)
+    expected = adj * (w / np.maximum(j, J_FLOOR * j_rest))[:, None, None]
+    assert (j < J_FLOOR * j_rest).any() == floored
+    np.testing.assert_allclose(op._flux_metric.numpy(), expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
+    K = op.stiffness_matrix()
+    assert abs(K - K.T).max() <= 1e-12 * abs(K).max()
+    np.testing.assert_allclose(K @ np.ones(mesh.n_vertices), 0.0, atol=1e-12 * abs(K).max())
+
+
 @pytest.mark.parametrize(
     "call, message",
     [

@@ -128,8 +128,9 @@ def test_adaptive_dt_goes_on_below_a_falling_bound_and_resumes_exactly(falling_b
 
 
 def test_a_blow_up_at_an_unresolved_fold_says_so(monkeypatch):
-    """A wave blow-up where a vertex's lumped mass has grown 200× (a fold sharper than the mesh)
-    names the vertex and the fix; the same blow-up on a resolved surface is passed on unchanged."""
+    """A wave blow-up where a vertex's lumped mass has grown 200×, or where the limit surface is
+    singular (an area element at 1e-6 of its rest value), both folds sharper than the mesh, names
+    the place and the fix; the same blow-up on a resolved surface is passed on unchanged."""
     from wavewarp.scene import load_scene, resolve
     from wavewarp.waves import BlowUpError
 
@@ -143,10 +144,16 @@ def test_a_blow_up_at_an_unresolved_fold_says_so(monkeypatch):
     with pytest.raises(BlowUpError) as plain:
         run.advance_frame()
     assert str(plain.value) == "telegraph leapfrog blew up"
+    pinched = run.rest_area.copy()
+    pinched[3 * 11 + 2] *= 1e-6  # a point of triangle 11 (rule "3": three points per triangle)
+    monkeypatch.setattr(run.operator, "area_elements", lambda: pinched)
+    message = r"singular in triangle 11 \(area element 1\.0e-06 of its rest value\), .* \(--set level\)"
+    with pytest.raises(BlowUpError, match=message):
+        run.advance_frame()
     swollen = run.rest_mass.copy()
     swollen[7] *= 200.0
     monkeypatch.setattr(run.operator, "mass", lambda: swollen)
-    with pytest.raises(BlowUpError, match=r"vertex 7's lumped mass is 200× its rest value .* \(--set level\)"):
+    with pytest.raises(BlowUpError, match=r"vertex 7's lumped mass is 200× its rest value, .* \(--set level\)"):
         run.advance_frame()
 
 
@@ -460,7 +467,7 @@ def test_scene_defaults_are_the_accuracy_benchmarks_recommendation(scene):
 def test_symmetry_number_finds_an_azimuthal_mode_and_ignores_the_axisymmetric_profile():
     """The buckling measure (Fig. S1a) on fields known in advance: an axisymmetric bulge whose
     slope and curvature cross the front's ring reads n = 0; adding a 5-fold ripple of 0.3 h reads
-    n = 5 with that amplitude."""
+    n = 5 with that amplitude, one of 0.05 h (below a tenth of h: not a buckle) n = 0."""
     from types import SimpleNamespace
 
     from wavewarp.scene import symmetry_number
@@ -478,3 +485,5 @@ def test_symmetry_number_finds_an_azimuthal_mode_and_ignores_the_axisymmetric_pr
     ripple = 0.3 * h * np.cos(5 * phi)
     n, amplitude = symmetry_number(run, rest + (bulge + ripple)[:, None] * unit)
     assert n == 5 and amplitude == pytest.approx(0.3, rel=0.05)
+    n, amplitude = symmetry_number(run, rest + (bulge + ripple / 6)[:, None] * unit)
+    assert n == 0 and amplitude == pytest.approx(0.05, rel=0.05)

@@ -53,6 +53,10 @@ from .kernels.limit_surface import limit_positions_kernel
 from .mesh import Mesh
 
 DISCRETIZATIONS = ("subdivision", "p1")
+# j_floor / rest j: the stiffness's area element is kept above this fraction of the rest one. Only a
+# singular limit surface reaches it (a fold sharper than the mesh: level-5 buckling, H100, 2e-9 at
+# one point and λ_max 4e7× before the blow-up); contraction e^{-AC c} at AC = 1.5 leaves 0.22
+J_FLOOR = 1e-2
 DOT_STRIDE = 16384  # partial sums per dot product: few atomics, enough threads for a GPU
 
 
@@ -80,6 +84,7 @@ class LaplaceBeltrami:
                 self.tables = SurfaceTables.of(mesh, str(rule), device=self.device, dtype=dtype)
                 self._flux_metric = wp.empty(self.tables.n_quadrature_points, dtype=mat22(self.scalar))
                 self._area = wp.empty(self.tables.n_quadrature_points, dtype=self.scalar)
+                self._j_floor = wp.zeros(self.tables.n_quadrature_points, dtype=self.scalar)
             else:
                 self._triangles = wp.array(mesh.triangles, dtype=wp.int32)
                 self._cot_weight = wp.empty(mesh.n_triangles, dtype=self.vec3)
@@ -100,6 +105,10 @@ class LaplaceBeltrami:
         self._power = {}  # per mass_corrections: the power iteration's vectors, sums and window graphs
         self.version = 0
         self._mass_version = None
+        if discretization == "subdivision":  # the floor of j in D: a fraction of the rest surface's
+            self.update(mesh.vertices)
+            weights = np.tile(self.tables.host.weights, self.tables.n_quadrature_points // len(self.tables.host.weights))
+            self._j_floor.assign((J_FLOOR * self._area.numpy() / weights).astype(self._real))
         self.update(x)
 
     @property
@@ -139,7 +148,8 @@ class LaplaceBeltrami:
             t = self.tables
             wp.launch(surface_metric_kernel, dim=t.n_quadrature_points,
                       inputs=[self._x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights,
-                              t.points_per_triangle], outputs=[self._flux_metric, self._area, self.mass_device],
+                              t.points_per_triangle, self._j_floor],
+                      outputs=[self._flux_metric, self._area, self.mass_device],
                       device=self.device)  # fmt: skip
         else:
             wp.launch(p1_geometry_kernel, dim=self.mesh.n_triangles, inputs=[self._points, self._triangles],
@@ -178,6 +188,10 @@ class LaplaceBeltrami:
     def mass(self) -> np.ndarray:
         """(V,) lumped mass: ∫ N_I dω (subdivision; sums to the limit-surface area) or area / 3 (P1)."""
         return self.mass_device.numpy().astype(np.float64)
+
+    def area_elements(self) -> np.ndarray:
+        """dω at every quadrature point (subdivision; (Q,)) or the triangles' areas (P1; (T,))."""
+        return self._area.numpy().astype(np.float64)
 
     @property
     def area(self) -> float:
