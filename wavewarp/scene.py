@@ -19,6 +19,7 @@ import numpy as np
 from .coupled import QuasiStatic
 from .laplace import J_FLOOR, LaplaceBeltrami
 from .mesh import Mesh
+from .relax import NEWTON_STEPS
 from .self_contact import SelfContact
 from .shell import Shell
 from .unfolding import first_arrival
@@ -121,7 +122,7 @@ TELEGRAPH_PARAMETERS = {
     "relax_iterations": Param(0, "CG iteration budget per relaxation; where CG spends it, Newton steps finish "
                               "(relax_method auto); 0 = 2,000 on a CPU, 20,000 on a GPU, where a CG iteration costs "
                               "~1/6 as much against the same host factorization (docs/shell.md)", minimum=0),  # fmt: skip
-    "newton_steps": Param(500, "Newton steps a finish may take (a snap-through took 132–137)", minimum=1),
+    "newton_steps": Param(NEWTON_STEPS, "Newton steps a finish may take (a snap-through took 132–137)", minimum=1),
     "relax_method": Param("auto", "auto: CG, then a Newton finish where CG spends its budget (the late oocytes' "
                           "nearly singular Hessian, docs/shell.md); ncg: CG only; newton: Newton only",
                           choices=("auto", "ncg", "newton")),  # fmt: skip
