@@ -13,7 +13,7 @@ from wavewarp.benchmarks.accuracy import FAMILIES, closed_form_stretch, front_re
 from wavewarp.cli import main as cli
 from wavewarp.cli import scene_descriptions
 
-CONFIGURATIONS = {"spectrum": {"sphere"}, "telegraph": {"modes", "pulse"}, "radius": set(FAMILIES),
+CONFIGURATIONS = {"spectrum": {"sphere"}, "telegraph": {"modes", "pulse", "wide pulse"}, "radius": set(FAMILIES),
                   "arrival": {"sphere", "cube"}, "front": {"sphere"}}  # fmt: skip
 SETTING = ("level", "divisions", "rule", "discretization", "mass_corrections", "dt_fraction", "tol_factor")
 

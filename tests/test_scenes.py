@@ -254,6 +254,21 @@ def test_oocyte_wave_is_rotationally_symmetric_at_constant_speed(tmp_path, capsy
     assert result["speed_nonlinearity"] < 0.03
     assert result["arrival_spread"] < 0.5  # spread within a ring < half the time to cross one ring
     assert any(path.endswith("_kymograph.png") for path in result["outputs"])
+    # the shell stays axisymmetric to the end, as Fig. 1b shows (the icosphere's imprint reads 0.03% R)
+    assert result["shape_asymmetry"] < 0.01 and result["axisymmetric_until"] == pytest.approx(math.pi * 5)
+
+
+def test_ascidian_shell_stays_axisymmetric_until_the_wave_converges(tmp_path, capsys):
+    """SPEC §7 / Fig. 1a: the ascidian's strong contraction (AC = 1.5, AI = 1.6) keeps the shell
+    rotationally symmetric while the wave crosses it. The default pulse (R/2 wide) at R = 5, level 3
+    (the default's control edge relative to the pulse): measured axisymmetric to t = 15.08 of 15.71
+    (front at 173°), then 4% R as the wave converges on the antipode; with the starfish's √2 reading
+    (R/7) it buckles at t = 3.8 and goes lopsided by 2 R (388 s, 28 Newton finishes)."""
+    code, out, err = run_cli(capsys, "ascidian", "--device", "cpu", "--set", "radius=5", "--set", "thickness=0.25",
+                             "--set", "level=3", "--set", "width=2.5", "--out", str(tmp_path / "a.usda"), "--json")  # fmt: skip
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["axisymmetric_until"] >= 0.9 * math.pi * 5
 
 
 @pytest.mark.parametrize("scene", ["cube-waves", "prism-waves"])
@@ -432,6 +447,13 @@ def test_prism_wave_leaves_the_exact_imprint_on_the_opposite_face(origin, fold, 
 ACCURACY = os.path.join(os.path.dirname(__file__), os.pardir, "benchmarks", "results", "accuracy_cpu.json")
 DEPARTURES = {  # scene: {axis: (recommended, the scene's)} where the scene's physics needs more than the checks
     "buckling-modes": {"level": (3, 4)},  # the buckling wavelength (scenes/buckling_modes.py)
+    # the contracted shell's shape (scenes/ascidian.py); dt 0.4 × the rest bound leaves room for the contraction
+    # (lengths shrink to e^{-AC/2} = 0.47 at c = 1, and the guard refuses dt past the moving bound)
+    "ascidian": {"level": (3, 4), "dt_fraction": (0.9, 0.4)},
+    # the rounded box edges' curvature (docs/geometry.md: rule 3 misses 3% of the Gauss–Bonnet integral), which
+    # the checks' proxies do not see; rule 3 meets them too, and which of the two is cheaper changes between runs
+    "cube-waves": {"rule": ("3", "3x4")},
+    "prism-waves": {"rule": ("3", "3x4")},
 }
 
 
@@ -459,9 +481,40 @@ def test_scene_defaults_are_the_accuracy_benchmarks_recommendation(scene):
     recommended = result["scene_settings"][scene]
     assert "unmet" not in recommended
     for axis, (bench, scene_value) in DEPARTURES.get(scene, {}).items():
-        assert recommended[axis] == bench
+        assert recommended[axis] in (bench, scene_value)  # where both meet the checks, timing may pick either
         recommended[axis] = scene_value
     assert declared(scene) == recommended
+
+
+def test_shape_asymmetry_reads_a_known_ripple_and_ignores_rigid_motion_and_axisymmetric_shapes():
+    """The oocytes' symmetry check (Fig. 1a) on shapes known in advance: a steep axisymmetric bulge,
+    translated and rotated about the wave's axis, reads below 0.05% of R (the rings' residual); adding
+    a 3-fold ripple of 2% R centred at θ = 1.2 reads m = 3 there with that amplitude; a lopsided
+    (m = 1) radial bump reads m = 1."""
+    from types import SimpleNamespace
+
+    from wavewarp.scene import shape_asymmetry
+
+    R = 10.0
+    mesh = icosphere(R, 4)
+    run = SimpleNamespace(size=R, mesh=mesh, origin=np.array([0.0, 0.0, R]))
+    rest = mesh.vertices
+    unit = rest / np.linalg.norm(rest, axis=1, keepdims=True)
+    theta, phi = np.arccos(np.clip(unit[:, 2], -1, 1)), np.arctan2(unit[:, 1], unit[:, 0])
+    bulge = 0.3 * R * np.exp(-((theta - 0.9) ** 2) / 0.05) - 0.1 * R * theta  # steep across the rings
+    turn = 0.7
+    rotation = np.array([[np.cos(turn), -np.sin(turn), 0], [np.sin(turn), np.cos(turn), 0], [0, 0, 1]])
+
+    def moved(x):
+        return x @ rotation.T + np.array([1.0, -2.0, 3.0])
+
+    amplitude, _, _ = shape_asymmetry(run, moved(rest + bulge[:, None] * unit))
+    assert amplitude < 5e-4
+    ripple = 0.02 * R * np.cos(3 * phi) * np.exp(-((theta - 1.2) ** 2) / 0.02)
+    amplitude, m, where = shape_asymmetry(run, moved(rest + (bulge + ripple)[:, None] * unit))
+    assert m == 3 and amplitude == pytest.approx(0.02, rel=0.05) and where == pytest.approx(1.2, abs=0.05)
+    lopsided = 0.02 * R * np.cos(phi) * np.exp(-((theta - 2.0) ** 2) / 0.02)
+    assert shape_asymmetry(run, moved(rest + (bulge + lopsided)[:, None] * unit))[1] == 1
 
 
 def test_symmetry_number_finds_an_azimuthal_mode_and_ignores_the_axisymmetric_profile():

@@ -368,8 +368,7 @@ def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initi
     if p["noise"] > 0:  # an imperfection of the rest shape: perturbed positions alone relax back at t = 0
         mesh = Mesh(seeded_noise(mesh, p["noise"] * R, seed), mesh.triangles)
     return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or math.pi * R / p["gamma"],
-                              device=device, profile=profile or meridian_curvature_radius,
-                              measure=measure or sphere_wave_measurements,
+                              device=device, profile=profile or oocyte_profile, measure=measure or oocyte_measurements,
                               figures=figures or {"kymograph": kymograph_png})  # fmt: skip
 
 
@@ -650,6 +649,30 @@ def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), ri
             "arrival_spread": spread / (crossing / rings)}  # fmt: skip
 
 
+def asymmetry_measurements(run) -> dict:
+    """The shell's largest shape asymmetry over the frames (shape_asymmetry: in R, and its mode) and
+    `axisymmetric_until`, the last frame time before one passes AXISYMMETRY_TOLERANCE (None if the
+    first does)."""
+    times = [t for t, _ in run.profiles]
+    values = [value[1] for _, value in run.profiles]
+    if not values:
+        return {"shape_asymmetry": None, "shape_asymmetry_mode": None, "axisymmetric_until": None}
+    k = int(np.argmax([amplitude for amplitude, _, _ in values]))
+    broken = [j for j, (amplitude, _, _) in enumerate(values) if amplitude > AXISYMMETRY_TOLERANCE]
+    until = times[-1] if not broken else (times[broken[0] - 1] if broken[0] > 0 else None)
+    return {"shape_asymmetry": values[k][0], "shape_asymmetry_mode": values[k][1], "axisymmetric_until": until}
+
+
+def oocyte_profile(run, x) -> tuple:
+    """A frame's figures and checks: the meridian's curvature radius (the kymograph's row) and the
+    shell's shape asymmetry."""
+    return meridian_curvature_radius(run, x), shape_asymmetry(run, x)
+
+
+def oocyte_measurements(run) -> dict:
+    return {**sphere_wave_measurements(run), **asymmetry_measurements(run)}
+
+
 def meridian_curvature_radius(run, x, bins=90) -> np.ndarray:
     """The local mean-curvature radius 1/H along the meridian through the origin (x > 0 half-plane
     containing the polar axis), in `bins` bins of the rest polar angle: the kymograph's rows."""
@@ -682,7 +705,7 @@ def kymograph_png(run, path) -> None:
     from .io import write_png
 
     times = [t for t, _ in run.profiles]
-    image = np.array([profile for _, profile in run.profiles]) / run.size
+    image = np.array([profile[0] for _, profile in run.profiles]) / run.size
     fig, ax = plt.subplots(figsize=(6, 4.5))
     extent = (0, math.pi * run.size, times[-1] if times else 1, times[0] if times else 0)
     shown = ax.imshow(image, aspect="auto", extent=extent, cmap="RdBu", vmin=0.0, vmax=2.0)
@@ -728,33 +751,70 @@ def frame_png(run, path) -> None:
     write_png(fig, path, dpi=110)
 
 
+def polar_coordinates(run) -> tuple:
+    """Per rest vertex: its polar angle θ from the wave's origin about the sphere's centre, and its
+    azimuth φ about that axis."""
+    rest = run.mesh.vertices
+    axis = run.origin / np.linalg.norm(run.origin)
+    theta = np.arccos(np.clip(rest @ axis / np.linalg.norm(rest, axis=1), -1, 1))
+    side = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    side /= np.linalg.norm(side)
+    return theta, np.arctan2(rest @ np.cross(axis, side), rest @ side)
+
+
+def ring_modes(radial: np.ndarray, offset: np.ndarray, phi: np.ndarray, modes: np.ndarray) -> np.ndarray:
+    """Amplitudes of the azimuthal modes `modes` of `radial` on a latitude ring (its vertices at
+    polar offsets `offset` from the ring's centre and azimuths `phi`), less the ring's axisymmetric
+    profile across the band (a quadratic in the offset): its slope and curvature would leak into the
+    modes of the ring's irregularly placed vertices."""
+    trend = np.vander(offset, 3)
+    radial = radial - trend @ np.linalg.lstsq(trend, radial, rcond=None)[0]
+    return np.abs(np.exp(-1j * np.outer(modes, phi)) @ radial) * 2 / len(radial)
+
+
 def symmetry_number(run, x, threshold=0.1) -> tuple:
     """(n, amplitude): the dominant azimuthal mode m ≥ 2 of the radial displacement on the latitude
     ring at the wave front (rest polar angle γ t / R, one control edge wide), less its axisymmetric
     trend across the ring, and its amplitude in units of h; n = 0 while every mode is below
     `threshold` h (axisymmetric). A tenth of h: on shells that do not buckle the icosphere's imprint,
     the seeded imperfection and the irregular ring's residual read up to 0.03 h (docs/scenes.md)."""
-    R = run.size
-    rest = run.mesh.vertices
-    axis = run.origin / np.linalg.norm(run.origin)
-    theta = np.arccos(np.clip(rest @ axis / np.linalg.norm(rest, axis=1), -1, 1))
+    R, rest = run.size, run.mesh.vertices
+    theta, phi = polar_coordinates(run)
     front = min((run.front_start + run.p["gamma"] * run.profile_time) / R, math.pi)
     ring = np.abs(theta - front) < 0.5 * mean_edge(run.mesh) / R
     if ring.sum() < 8:
         return 0, 0.0
-    side = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
-    side /= np.linalg.norm(side)
-    phi = np.arctan2(rest[ring] @ np.cross(axis, side), rest[ring] @ side)
     radial = np.linalg.norm(np.asarray(x)[ring], axis=1) - np.linalg.norm(rest[ring], axis=1)
-    # remove the axisymmetric profile across the band (a quadratic in θ): its slope and curvature
-    # would leak into the azimuthal modes of the ring's irregularly placed vertices
-    offset = theta[ring] - front
-    trend = np.vander(offset, 3)
-    radial -= trend @ np.linalg.lstsq(trend, radial, rcond=None)[0]
     modes = np.arange(2, max(3, ring.sum() // 2))
-    amplitude = np.abs(np.exp(-1j * np.outer(modes, phi)) @ radial) * 2 / ring.sum() / run.p["thickness"]
+    amplitude = ring_modes(radial, theta[ring] - front, phi[ring], modes) / run.p["thickness"]
     k = int(np.argmax(amplitude))
     return (int(modes[k]) if amplitude[k] > threshold else 0), float(amplitude[k])
+
+
+# a shell reads as axisymmetric while every ring mode is below this fraction of R: the icosphere's
+# imprint reads up to 0.03% on the oocytes, a buckled ascidian 5% and more (docs/scenes.md)
+AXISYMMETRY_TOLERANCE = 0.01
+
+
+def shape_asymmetry(run, x) -> tuple:
+    """(amplitude / R, m, θ): the largest azimuthal mode 1 ≤ m ≤ 8 of the change in distance from the
+    centroid (so rigid motion reads nothing), over the latitude rings (one control edge wide) about the
+    wave's axis, each less its axisymmetric profile across the ring; θ is that ring's rest polar
+    angle. m = 1 is a lopsided shell."""
+    R, rest, x = run.size, run.mesh.vertices, np.asarray(x)
+    theta, phi = polar_coordinates(run)
+    radial = np.linalg.norm(x - np.mean(x, axis=0), axis=1) - np.linalg.norm(rest - rest.mean(axis=0), axis=1)
+    width = mean_edge(run.mesh) / R
+    best = (0.0, 0, 0.0)
+    for centre in np.arange(width, math.pi - 0.5 * width, width):
+        ring = np.abs(theta - centre) < 0.5 * width
+        if ring.sum() < 4 * 8:  # m ≤ 8 with four vertices per wavelength
+            continue
+        amplitude = ring_modes(radial[ring], theta[ring] - centre, phi[ring], np.arange(1, 9)) / R
+        k = int(np.argmax(amplitude))
+        if amplitude[k] > best[0]:
+            best = (float(amplitude[k]), k + 1, float(centre))
+    return best
 
 
 def buckling_measurements(run) -> dict:
