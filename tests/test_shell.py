@@ -261,3 +261,27 @@ def test_warp_shell_equals_an_independent_numpy_implementation(rng):
     shell = Shell(mesh, **parameters, device="cpu", **F64)
     assert shell.energy(x, c) == pytest.approx(energy, rel=1e-12)
     np.testing.assert_allclose(shell.forces(x, c), forces, atol=1e-12 * np.abs(forces).max())
+
+
+def test_a_new_rest_volume_reaches_the_next_relaxation():
+    """The relaxation loop is captured once (on the CPU too) and V̄ is one of its launch arguments, so
+    setting V̄ must drop the captured loop: a shell relaxed before V̄ changed then relaxes as a fresh
+    shell built with the new V̄ does, not back to its old volume."""
+    mesh = icosphere(10.0, 2)
+
+    def shell_with(volume_fraction, relaxed_before=None):
+        shell = Shell(mesh, 1.0, 1.0, 0.33, volume_penalty=1.0, device="cpu", dtype="float64")
+        rest = shell.rest_volume
+        if relaxed_before is not None:
+            shell.rest_volume = relaxed_before * rest
+            shell.relax(mesh.vertices, 0.0, tol=1e-3, method="ncg")
+        shell.rest_volume = volume_fraction * rest
+        return shell, rest
+
+    reused, rest = shell_with(0.95, relaxed_before=0.99)
+    fresh, _ = shell_with(0.95)
+    volume = reused.volume(reused.relax(mesh.vertices, 0.0, tol=1e-3, method="ncg"))
+    assert volume == pytest.approx(fresh.volume(fresh.relax(mesh.vertices, 0.0, tol=1e-3, method="ncg")), rel=1e-12)
+    assert volume < 0.97 * rest  # compressed towards the new target, not the old one
+    with pytest.raises(ValueError, match="rest_volume"):
+        reused.rest_volume = float("nan")

@@ -16,6 +16,7 @@ from .dynamics import Ground, OverdampedDynamics, ShellDynamics  # noqa: E402
 from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
 from .laplace import LaplaceBeltrami  # noqa: E402
 from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
+from .modes import azimuthal_order, softest_modes  # noqa: E402
 from .self_contact import SelfContact  # noqa: E402
 from .shell import RelaxationError, Shell  # noqa: E402
 from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, gaussian_pulse, steady_front  # noqa: E402
@@ -24,6 +25,6 @@ __all__ = [
     "BlowUpError", "FitzHughNagumo", "Ground", "LaplaceBeltrami", "LimitSurface", "Mesh", "OscillationError",
     "OverdampedDynamics", "RelaxationError", "SelfContact", "Shell",
     "ShellDynamics", "Telegraph",
-    "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism", "sample_points", "save",
-    "steady_front", "__version__",
+    "azimuthal_order", "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism", "sample_points", "save",
+    "softest_modes", "steady_front", "__version__",
 ]  # fmt: skip

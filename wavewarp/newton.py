@@ -112,6 +112,12 @@ class NewtonFinish:
         self.inverse, self.shift = None, None
         self.factorizations = self.krylov_steps = 0
 
+    def share_reference(self) -> None:
+        """Give the float64 twin (if any) the shell's active reference concentrations."""
+        if self.work is not self.shell:
+            c = self.shell.reference_c.numpy().astype(np.float64)
+            self.work.update_reference(wp.array(c, dtype=wp.float64, device=self.work.device))
+
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(E, F) at positions x (float64 NumPy)."""
         self.x.assign(x)
@@ -160,9 +166,7 @@ class NewtonFinish:
                              "pattern): relax with method='ncg'")  # fmt: skip
         if self.shell.gradient == "autodiff":
             raise ValueError("the Newton finish needs the analytic forces: relax with method='ncg'")
-        if work is not self.shell:
-            c = self.shell.reference_c.numpy().astype(np.float64)
-            work.update_reference(wp.array(c, dtype=wp.float64, device=work.device))
+        self.share_reference()
         scale = work.force_scale()
         x = np.asarray(x0, dtype=np.float64).copy()
         energy, forces = self.evaluate(x)
@@ -234,15 +238,23 @@ class NewtonFinish:
 class ShiftedInverse:
     """(H + W C Wᵀ + shift I)⁻¹ by sparse LU and Woodbury (its form without C⁻¹: C may be singular)."""
 
-    def __init__(self, h: sparse.csr_matrix, w: np.ndarray, coupling: np.ndarray, shift: float | None):
-        """shift None: 1e-8 × the mean |diagonal| (the first LM shift)."""
+    def __init__(self, h: sparse.csr_matrix, w: np.ndarray, coupling: np.ndarray, shift: float | None,
+                 symmetric: bool = False):  # fmt: skip
+        """shift None: 1e-8 × the mean |diagonal| (the first LM shift). symmetric: a symmetric ordering
+        with diagonal pivots, so U's diagonal holds the pivots of L D Lᵀ (`negative_pivots`)."""
         self.scale = float(np.abs(h.diagonal()).mean())
         self.shift = 1e-8 * self.scale if shift is None else shift
-        self.lu = sparse_linalg.splu((h + self.shift * sparse.identity(h.shape[0], format="csr")).tocsc())
+        options = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
+        self.lu = sparse_linalg.splu((h + self.shift * sparse.identity(h.shape[0], format="csr")).tocsc(),
+                                     **(options if symmetric else {}))  # fmt: skip
         self.w, self.coupling = w, coupling
         if coupling.any():
             self.z = self.lu.solve(w)
             self.capacitance = np.eye(len(coupling)) + coupling @ (w.T @ self.z)
+
+    def negative_pivots(self) -> int:
+        """Eigenvalues of H + shift I below zero (Sylvester's law of inertia; `symmetric` factorizations)."""
+        return int(np.count_nonzero(self.lu.U.diagonal() < 0))
 
     def solve(self, f: np.ndarray) -> np.ndarray:
         y = self.lu.solve(f)

@@ -126,13 +126,25 @@ class Shell:
                 self._entry_triangle = wp.array(triangle, dtype=wp.int32)
             else:
                 self._jets = wp.zeros((1, 6), dtype=self.vec3)
+        self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
-        self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
         self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
         self.newton_steps = 0  # Newton steps of the last relaxation
         self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
+
+    @property
+    def rest_volume(self) -> float:
+        """V̄ of the volume term μV (V − V̄)²: the rest shape's volume unless set (a pressure load). Set
+        it before building a stepper that captures a CUDA graph (the dynamics): theirs keep the old V̄."""
+        return self._rest_volume
+
+    @rest_volume.setter
+    def rest_volume(self, volume) -> None:
+        self._rest_volume = finite("rest_volume", volume)
+        if self._relaxation is not None:
+            self._relaxation.forget_graphs()  # a captured relaxation loop holds the old V̄ as a launch argument
 
     @property
     def self_contact(self):
