@@ -285,3 +285,19 @@ def test_a_new_rest_volume_reaches_the_next_relaxation():
     assert volume < 0.97 * rest  # compressed towards the new target, not the old one
     with pytest.raises(ValueError, match="rest_volume"):
         reused.rest_volume = float("nan")
+
+
+def test_a_new_rest_volume_reaches_the_newton_finish_of_a_float32_shell():
+    """A float32 shell's Newton finish works on a float64 twin built at its first use: the twin must
+    take a V̄ set later too, so the reused shell ends where a fresh one with that V̄ does."""
+    mesh = icosphere(10.0, 2)
+    volumes = []
+    for relaxed_before in (0.99, None):
+        shell = Shell(mesh, 1.0, 1.0, 0.33, volume_penalty=1.0, device="cpu", dtype="float32")
+        rest = shell.rest_volume
+        if relaxed_before is not None:
+            shell.rest_volume = relaxed_before * rest
+            shell.relax(mesh.vertices, 0.0, tol=1e-4, method="newton")
+        shell.rest_volume = 0.95 * rest
+        volumes.append(shell.volume(shell.relax(mesh.vertices, 0.0, tol=1e-4, method="newton")))
+    assert volumes[0] == pytest.approx(volumes[1], rel=1e-5)

@@ -25,6 +25,6 @@ __all__ = [
     "BlowUpError", "FitzHughNagumo", "Ground", "LaplaceBeltrami", "LimitSurface", "Mesh", "OscillationError",
     "OverdampedDynamics", "RelaxationError", "SelfContact", "Shell",
     "ShellDynamics", "Telegraph",
-    "azimuthal_order", "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism", "sample_points", "save",
-    "softest_modes", "steady_front", "__version__",
+    "azimuthal_order", "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism",
+    "sample_points", "save", "softest_modes", "steady_front", "__version__",
 ]  # fmt: skip

@@ -113,10 +113,11 @@ class NewtonFinish:
         self.factorizations = self.krylov_steps = 0
 
     def share_reference(self) -> None:
-        """Give the float64 twin (if any) the shell's active reference concentrations."""
+        """Give the float64 twin (if any) the shell's active reference concentrations and V̄."""
         if self.work is not self.shell:
             c = self.shell.reference_c.numpy().astype(np.float64)
             self.work.update_reference(wp.array(c, dtype=wp.float64, device=self.work.device))
+            self.work.rest_volume = self.shell.rest_volume
 
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(E, F) at positions x (float64 NumPy)."""
