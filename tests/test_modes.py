@@ -146,3 +146,11 @@ def test_softest_modes_refuse_a_shell_with_self_contact():
     shell.self_contact = SelfContact(shell)
     with pytest.raises(ValueError, match="self-contact"):
         softest_modes(shell, mesh.vertices)
+
+
+@pytest.mark.parametrize("count", [0, -1, 2.5, True, 10**6])
+def test_softest_modes_refuse_a_bad_count(count):
+    mesh = icosphere(R, 1)
+    shell = Shell(mesh, 1.0, Y, NU, device="cpu", dtype="float64")
+    with pytest.raises(ValueError, match="count must be an integer from 1 to"):
+        softest_modes(shell, mesh.vertices, count=count)

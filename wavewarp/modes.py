@@ -34,6 +34,9 @@ def softest_modes(shell, x, c=0.0, count: int = 6) -> Modes:
 
     if shell.self_contact is not None:
         raise ValueError("softest_modes: self-contact is not in the Hessian; build the shell with self_contact=None")
+    largest = 3 * shell.mesh.n_vertices - 7  # eigsh needs count < n, less the six rigid motions
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 1 <= count <= largest:
+        raise ValueError(f"count must be an integer from 1 to {largest} for this mesh, got {count!r}")
     x = np.asarray(x, dtype=np.float64)
     shell.forces(x, c)  # sets the active reference for c
     newton = shell._newton or NewtonFinish(shell)
