@@ -78,19 +78,17 @@ def stored_path(path: str, *, device):
 def stability_path(run, frames, *, count: int, bump: float, bump_frames) -> dict:
     """Softest modes at every frame (t, x, c) of `run`'s path, and finite bumps at `bump_frames`."""
     from wavewarp.modes import azimuthal_order, softest_modes
-    from wavewarp.scene import shape_asymmetry
+    from wavewarp.scene import polar_coordinates, shape_asymmetry
 
     p, shell = run.p, run.shell
     R, h = p["radius"], p["thickness"]
     unit = p["young"] * h / R**2
-    rest = shell.mesh.vertices
-    theta = np.arccos(np.clip(rest[:, 2] / np.linalg.norm(rest, axis=1), -1.0, 1.0))
-    phi = np.arctan2(rest[:, 1], rest[:, 0])
+    theta, phi = polar_coordinates(run)  # about the wave's axis, as the scene's own measurements
     rows, bumps, start = [], [], time.perf_counter()
     for frame, (t, x, c) in enumerate(frames):
         front = (run.front_start + p["gamma"] * t) / R
         modes = softest_modes(shell, x, c, count)
-        orders = [azimuthal_order(x, v) for v in modes.vectors]
+        orders = [azimuthal_order(x, v, axis=run.origin) for v in modes.vectors]
         where = [float(np.degrees(np.sum(theta * np.sum(v**2, axis=1)) / np.sum(v**2))) for v in modes.vectors]
         asymmetry, order, _ = shape_asymmetry(run, x)
         rows.append([float(t), math.degrees(front), (modes.values / unit).tolist(), orders, where,
