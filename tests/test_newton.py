@@ -8,7 +8,8 @@ from wavewarp.coupled import QuasiStatic
 from wavewarp.geometry import limit_positions
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
-from wavewarp.newton import NewtonFinish, distance_two_colouring, patch_pairs
+from wavewarp.modes import softest_modes
+from wavewarp.newton import NewtonFinish, ShiftedInverse, distance_two_colouring, patch_pairs, rigid_modes
 from wavewarp.relax import ROUND_OFF_SLACK
 from wavewarp.self_contact import SelfContact
 from wavewarp.shell import RelaxationError, Shell
@@ -99,6 +100,68 @@ def test_a_factorization_that_does_not_precondition_is_replaced():
     x = shell.relax(mesh.vertices, c, tol=1e-11, method="newton")
     assert finish.factorizations > factored and finish.krylov_steps >= solved
     assert np.abs(x - reference).max() < 1e-7
+
+
+def test_the_factorization_counts_negative_eigenvalues_in_the_complement_of_the_rigid_motions():
+    """The inertia of H + W C Wᵀ + shift I in the complement of the rigid motions, from the sparse LU's
+    pivots, the volume term's capacitance and the rigid rows' Schur complement, against a dense
+    eigensolver of the same matrix compressed to that complement; and the constrained solve is the
+    minimum of the quadratic model there (the KKT conditions). The state is far from equilibrium
+    (V̄ = 0.9 V): its Hessian has hundreds of negative eigenvalues, rigid rows with curvature, and a
+    breathing mode that only the volume term lifts."""
+    mesh = icosphere(10.0, 2)
+    shell = Shell(mesh, 1.0, 1.0, 0.33, volume_penalty=1.0, device="cpu", **F64)
+    shell.rest_volume = 0.9 * shell.rest_volume
+    x = mesh.vertices + 0.01 * np.random.default_rng(1).standard_normal(mesh.vertices.shape)
+    f = shell.forces(x, 0.0).ravel()
+    h, w, coupling = NewtonFinish(shell).hessian(x)
+    rigid = rigid_modes(x)
+    complement = np.linalg.qr(np.concatenate([rigid.T, np.eye(len(f))], axis=1))[0][:, 6:]
+
+    def spectrum(matrix):
+        compressed = complement.T @ matrix @ complement
+        return np.linalg.eigvalsh(0.5 * (compressed + compressed.T))
+
+    full = h.toarray() + w @ coupling @ w.T
+    dense, sparse_part = spectrum(full), spectrum(h.toarray())
+    # a shift where the volume term decides the count: the sparse part alone has one more below zero
+    edges = np.sort(-np.concatenate([dense, sparse_part]))
+    flips = [s for s in 0.5 * (edges[1:] + edges[:-1]) if (sparse_part + s < 0).sum() != (dense + s < 0).sum()]
+    shifts = [1e-8 * np.abs(h.diagonal()).mean(), -0.5 * (dense[0] + dense[1]), -0.5 * (dense[9] + dense[10]),
+              -1.5 * dense[0], flips[0]]  # fmt: skip
+    rigid_curvature = volume_lift = False
+    for shift in shifts:
+        inverse = ShiftedInverse(h, w, coupling, shift)
+        pivots = int((inverse.lu.U.diagonal() < 0).sum())
+        volume_lift |= bool(inverse.capacitance[0, 0] < 0)
+        inverse.constrain(rigid)
+        assert inverse.negative_eigenvalues() == (dense + shift < 0).sum()
+        rigid_curvature |= pivots - int(inverse.capacitance[0, 0] < 0) != inverse.negative_eigenvalues()
+        d = inverse.solve(f)
+        assert np.abs(rigid @ d).max() < 1e-10 * np.abs(d).max()
+        assert np.abs(complement.T @ (full @ d + shift * d - f)).max() < 1e-8 * np.abs(f).max()
+    assert (dense < 0).sum() > 100 and rigid_curvature and volume_lift  # every part of the count was needed
+
+
+def test_newton_keeps_the_stable_equilibrium_next_to_a_bifurcation():
+    """A sphere under 0.9 × Zoelly's pressure (level 3, h/R = 0.1, whose crossing is 0.935 × on this
+    mesh: test_modes.py) is stable but nearly critical. From the rest sphere, perturbed by 1e-9 R, the
+    Levenberg–Marquardt steps used to solve with an indefinite H + shift I (the start is far past
+    buckling: V̄ acts as a huge pressure there); their step amplified the perturbation along the soft
+    modes and Newton snapped to a dented equilibrium 6 h deep, crawling there for 450 steps. CG, a
+    descent method, stays with the sphere (spread 0.026 h). Shifting until the factorization shows a
+    positive definite model keeps Newton in that basin as well."""
+    R, h, nu, mu = 10.0, 1.0, 0.33, 1.0
+    mesh = icosphere(R, 3)
+    shell = Shell(mesh, h, 1.0, nu, volume_penalty=mu, device="cpu", **F64)
+    p = 0.9 * 2 * h**2 / (R**2 * np.sqrt(3 * (1 - nu**2)))
+    strain = p * R * (1 - nu) / (2 * h)
+    shell.rest_volume = shell.rest_volume * (1 - strain) ** 3 - p / (2 * mu)
+    start = mesh.vertices + 1e-9 * R * np.random.default_rng(0).standard_normal(mesh.vertices.shape)
+    x = shell.relax(start, 0.0, method="newton", newton_steps=40)
+    radius = np.linalg.norm(x - x.mean(axis=0), axis=1)
+    assert radius.max() - radius.min() < 0.05 * h
+    assert softest_modes(shell, x, count=1).values[0] > 0
 
 
 def test_auto_finishes_with_newton_where_cg_spends_its_budget():

@@ -58,10 +58,12 @@ def softest_modes(shell, x, c=0.0, count: int = 6) -> Modes:
 
     n = h.shape[0]
     sigma = -SHIFT * float(np.abs(h.diagonal()).mean())
-    inverse = ShiftedInverse(h, w, coupling, -sigma, symmetric=True)
-    while inverse.negative_pivots() > 0:  # H − σM has eigenvalues below σ (the PSD volume part only lifts them)
+    inverse = ShiftedInverse(h, w, coupling, -sigma)
+    inverse.constrain(rigid)
+    while inverse.negative_eigenvalues() > 0:  # H − σM has eigenvalues below σ
         sigma *= 4.0
-        inverse = ShiftedInverse(h, w, coupling, -sigma, symmetric=True)
+        inverse = ShiftedInverse(h, w, coupling, -sigma)
+        inverse.constrain(rigid)
     # every eigenvalue lies above σ, so the `count` nearest σ are the smallest
     values, vectors = sparse_linalg.eigsh(
         sparse_linalg.LinearOperator((n, n), action, dtype=np.float64), k=count, sigma=sigma, which="LM",

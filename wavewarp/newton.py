@@ -12,7 +12,10 @@ centroid, V = V₀ − x̄·S, couples every vertex through 2μV (V − V̄) ∇
 small as the quadrature's error in S = ⅓∫ n dω = 0 (measured: 1e-5 of the Hessian's largest
 entry). Newton's convergence is therefore quadratic down to residuals ~1e-6 and linear (ratio
 ~0.1 per step) below. Every step is checked on the energy, so the
-energy still falls monotonically. A float32 shell is finished on a float64 twin (a float32
+energy still falls monotonically, and solves with a positive definite H + shift I in the complement
+of the rigid motions (the factorization's inertia says so), so it is the minimum of a quadratic
+model: an indefinite model's step amplifies round-off along the soft modes and can jump to another
+equilibrium's basin next to a bifurcation. A float32 shell is finished on a float64 twin (a float32
 Hessian by differences is too coarse), and its own residual at the result is its round-off floor.
 The last factorization is kept: a step first tries CG on the exact Hessian action preconditioned by
 it, and factors anew only where that fails (across steps, shifts and relaxations).
@@ -178,15 +181,25 @@ class NewtonFinish:
             if residual <= tol:
                 return x, "converged", residual, energies
             hessian, rigid, f = None, rigid_modes(x), forces.ravel()
+            indefinite = False  # H(x) + shift I had a negative eigenvalue at this step's first shifts
             for _ in range(MAX_SHIFT_TRIES):
-                d = None if self.inverse is None else self._krylov_step(x, f, rigid)
+                d = None if self.inverse is None or indefinite else self._krylov_step(x, f, rigid)
                 if d is None:  # no factorization yet, or it no longer preconditions: factor H(x) + shift I
                     hessian = self.hessian(x) if hessian is None else hessian
-                    self.inverse = ShiftedInverse(*hessian, self.shift)
-                    self.shift = self.inverse.shift
                     self.factorizations += 1
+                    try:
+                        inverse = ShiftedInverse(*hessian, self.shift)
+                        self.shift = inverse.shift
+                        inverse.constrain(rigid)
+                        indefinite = inverse.negative_eigenvalues() > 0
+                    except RuntimeError:  # exactly singular
+                        self.shift = self.shift or 1e-8 * float(np.abs(hessian[0].diagonal()).mean())
+                        indefinite = True
+                    if indefinite:  # the quadratic model has no minimum: a larger shift
+                        self.shift *= 8.0
+                        continue
+                    self.inverse = inverse
                     d = self.inverse.solve(f)
-                    d -= rigid.T @ (rigid @ d)
                 predicted = f @ d - 0.5 * d @ self.hessian_action(x, d)
                 trial = x + d.reshape(-1, 3)
                 trial_energy, trial_forces = self.evaluate(trial)
@@ -199,7 +212,7 @@ class NewtonFinish:
                 self.shift *= 8.0
             else:
                 return x, "round-off", residual, energies
-            if predicted > 0 and drop >= 0.75 * predicted:
+            if predicted > 0 and drop >= 0.75 * predicted and not indefinite:
                 self.shift = max(self.shift / 8.0, 1e-12 * self.inverse.scale)
             x, energy, forces, residual = trial, trial_energy, trial_forces, trial_residual
             energies.append(energy)
@@ -216,6 +229,7 @@ class NewtonFinish:
         def project(v):
             return v - rigid.T @ (rigid @ v)
 
+        self.inverse.constrain(rigid)
         d, r = np.zeros_like(f), project(f)
         z = project(self.inverse.solve(r))
         p, rz, target = z.copy(), r @ z, KRYLOV_TOL * np.linalg.norm(r)
@@ -237,28 +251,54 @@ class NewtonFinish:
 
 
 class ShiftedInverse:
-    """(H + W C Wᵀ + shift I)⁻¹ by sparse LU and Woodbury (its form without C⁻¹: C may be singular)."""
+    """(H + W C Wᵀ + shift I)⁻¹ by sparse LU and Woodbury (its form without C⁻¹: C may be singular);
+    W is one column (the volume gradient), C = 2μV ≥ 0. After `constrain(rows)` it solves in the
+    complement of those rows (the rigid motions), and counts the eigenvalues there."""
 
-    def __init__(self, h: sparse.csr_matrix, w: np.ndarray, coupling: np.ndarray, shift: float | None,
-                 symmetric: bool = False):  # fmt: skip
-        """shift None: 1e-8 × the mean |diagonal| (the first LM shift). symmetric: a symmetric ordering
-        with diagonal pivots, so U's diagonal holds the pivots of L D Lᵀ (`negative_pivots`)."""
+    def __init__(self, h: sparse.csr_matrix, w: np.ndarray, coupling: np.ndarray, shift: float | None):
+        """shift None: 1e-8 × the mean |diagonal| (the first LM shift). The LU has a symmetric ordering
+        and diagonal pivots, so U's diagonal holds the pivots of L D Lᵀ (`negative_eigenvalues`); it
+        raises RuntimeError on an exactly singular matrix."""
         self.scale = float(np.abs(h.diagonal()).mean())
         self.shift = 1e-8 * self.scale if shift is None else shift
-        options = {"permc_spec": "MMD_AT_PLUS_A", "diag_pivot_thresh": 0.0, "options": {"SymmetricMode": True}}
         self.lu = sparse_linalg.splu((h + self.shift * sparse.identity(h.shape[0], format="csr")).tocsc(),
-                                     **(options if symmetric else {}))  # fmt: skip
+                                     permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                                     options={"SymmetricMode": True})  # fmt: skip
         self.w, self.coupling = w, coupling
         if coupling.any():
             self.z = self.lu.solve(w)
             self.capacitance = np.eye(len(coupling)) + coupling @ (w.T @ self.z)
+        self.rows = None
 
-    def negative_pivots(self) -> int:
-        """Eigenvalues of H + shift I below zero (Sylvester's law of inertia; `symmetric` factorizations)."""
-        return int(np.count_nonzero(self.lu.U.diagonal() < 0))
+    def constrain(self, rows: np.ndarray) -> None:
+        """Solve from now on for d with rows d = 0 (rows orthonormal, (k, n)): the minimum of the
+        quadratic model in their complement, d = A⁻¹ (f − rowsᵀ λ), A = H + W C Wᵀ + shift I (a KKT
+        system)."""
+        self.rows = rows
+        self.solved_rows = self._solve(rows.T)
+        self.schur = rows @ self.solved_rows
 
-    def solve(self, f: np.ndarray) -> np.ndarray:
+    def _solve(self, f: np.ndarray) -> np.ndarray:
         y = self.lu.solve(f)
         if not self.coupling.any():
             return y
         return y - self.z @ np.linalg.solve(self.capacitance, self.coupling @ (self.w.T @ y))
+
+    def solve(self, f: np.ndarray) -> np.ndarray:
+        y = self._solve(f)
+        if self.rows is None:
+            return y
+        return y - self.solved_rows @ np.linalg.solve(self.schur, self.rows @ y)
+
+    def negative_eigenvalues(self) -> int:
+        """Eigenvalues of A = H + W C Wᵀ + shift I below zero, in the complement of the constrained rows
+        if any. Sylvester's law of inertia counts those of H + shift I in the pivots. The PSD rank-one
+        W C Wᵀ lifts one of them exactly when it flips the determinant's sign, 1 + C Wᵀ (H + shift I)⁻¹ W
+        < 0. The complement of the rows R has those of A less the non-positive eigenvalues of R A⁻¹ Rᵀ
+        (the inertia of A's KKT matrix)."""
+        count = int(np.count_nonzero(self.lu.U.diagonal() < 0))
+        if self.coupling.any():
+            count -= int(self.capacitance[0, 0] < 0)
+        if self.rows is not None:
+            count -= int(np.count_nonzero(np.linalg.eigvalsh(0.5 * (self.schur + self.schur.T)) <= 0))
+        return count
