@@ -92,6 +92,35 @@ def test_free_shell_conserves_momentum_and_angular_momentum(device, rng):
         assert np.abs(L - L0).max() <= 1e-11 * scale
 
 
+def test_a_new_rest_volume_reaches_the_captured_dynamics_steps(device):
+    """V̄ is a launch argument of the force step, and on CUDA the steps run as a captured graph: a V̄
+    set after the first steps must reach the next ones (the shell's revision drops the graph). The
+    reference: a stepper built afresh with the new V̄ from the same state. On the CPU the steps are
+    not captured, and this checks the same semantics."""
+    mesh = icosphere(1.0, 2)
+
+    def stepper(rest_volume=None, x0=None, v0=None, dt=None, omega=None):
+        shell = Shell(mesh, thickness=0.1, young=100.0, volume_penalty=50.0, deterministic=True, device=device,
+                      dtype="float64")  # fmt: skip
+        if rest_volume is not None:
+            shell.rest_volume = rest_volume
+        return shell, ShellDynamics(shell, density=1.0, x0=x0, v0=v0, damping=1.0, dt=dt, omega=omega)
+
+    shell, run = stepper()
+    bound = dict(dt=run.dt, omega=run.omega_max)  # one time step for all three
+    run.advance(20)
+    x, v = run.positions(), run.velocities()
+    new_volume = 0.8 * shell.rest_volume
+    shell.rest_volume = new_volume
+    run.advance(20)
+    _, fresh = stepper(new_volume, x, v, **bound)
+    fresh.advance(20)
+    _, stale = stepper(None, x, v, **bound)
+    stale.advance(20)
+    assert np.abs(stale.positions() - fresh.positions()).max() > 1e-4  # the new V̄ moves the shell
+    np.testing.assert_allclose(run.positions(), fresh.positions(), rtol=0, atol=1e-12)
+
+
 def test_external_forces_match_the_formulas_on_the_limit_points(device, rng):
     """Gravity -M g ẑ on control points; contact and friction evaluated by NumPy on the limit points
     p = L x, u = L v (limit_positions is linear); Lᵀ keeps their sum (rows of L sum to 1)."""

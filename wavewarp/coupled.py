@@ -207,7 +207,7 @@ class Walking:
                 wp.copy(backup, a)
             wave._flag.zero_()
             run_steps(self._step, chunk, device=self.shell.device, graphs=self._graphs, modules=modules,
-                      capture=dynamics.capture and wave.capture)  # fmt: skip
+                      capture=dynamics.capture and wave.capture, revision=self.shell.revision)  # fmt: skip
             failure = wave._chunk_error(chunk, wave._check_chunk(), f" coupled to the {dynamics.scheme}")
             if failure is None:
                 failure = dynamics.runaway(dynamics.time, chunk * wave.dt)

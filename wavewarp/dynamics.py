@@ -272,7 +272,7 @@ class ShellDynamics:
     def _run(self, steps: int) -> None:
         run_steps(self._step, steps, device=self.device, graphs=self._graphs,
                   modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface, kernels_reduce),
-                  capture=self.capture)  # fmt: skip
+                  capture=self.capture, revision=self.shell.revision)  # fmt: skip
 
     def advance(self, steps: int = 1):
         """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""

@@ -118,7 +118,8 @@ class Relaxation:
             modules = (kernels_relax, kernels_shell, kernels_reduce)
             if shell.self_contact is not None:
                 modules += (kernels_self_contact, kernels_limit_surface, kernels_contact)
-            run_steps(solve, 1, device=shell.device, graphs=graphs, modules=modules, capture=self.capture)
+            run_steps(solve, 1, device=shell.device, graphs=graphs, modules=modules, capture=self.capture,
+                      revision=shell.revision)  # fmt: skip
         return self._result(tol, out)
 
     def forget_graphs(self) -> None:

@@ -127,6 +127,7 @@ class Shell:
             else:
                 self._jets = wp.zeros((1, 6), dtype=self.vec3)
         self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
+        self.revision = 0  # counts changes of V̄ and of the terms: captured steps re-capture (device.run_steps)
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
@@ -136,15 +137,14 @@ class Shell:
 
     @property
     def rest_volume(self) -> float:
-        """V̄ of the volume term μV (V − V̄)²: the rest shape's volume unless set (a pressure load). Set
-        it before building a stepper that captures a CUDA graph (the dynamics): theirs keep the old V̄."""
+        """V̄ of the volume term μV (V − V̄)²: the rest shape's volume unless set (a pressure load). A new
+        value reaches every stepper's next step: their captured graphs are captured anew."""
         return self._rest_volume
 
     @rest_volume.setter
     def rest_volume(self, volume) -> None:
         self._rest_volume = finite("rest_volume", volume)
-        if self._relaxation is not None:
-            self._relaxation.forget_graphs()  # a captured relaxation loop holds the old V̄ as a launch argument
+        self.revision += 1  # captured loops hold the old V̄ as a launch argument
 
     @property
     def self_contact(self):
@@ -158,8 +158,7 @@ class Shell:
         if term is not None and (not isinstance(term, SelfContact) or term.shell is not self):
             raise ValueError("self_contact must be None or a SelfContact built for this shell")
         self._self_contact = term
-        if self._relaxation is not None:
-            self._relaxation.forget_graphs()  # a captured relaxation loop holds the old set of terms
+        self.revision += 1  # captured loops hold the old set of terms
 
     # ---------------------------------------------------------------- device-level API
     def _s(self, value) -> object:
