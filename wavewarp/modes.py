@@ -67,7 +67,7 @@ def softest_modes(shell, x, c=0.0, count: int = 6) -> Modes:
     # every eigenvalue lies above σ, so the `count` nearest σ are the smallest
     values, vectors = sparse_linalg.eigsh(
         sparse_linalg.LinearOperator((n, n), action, dtype=np.float64), k=count, sigma=sigma, which="LM",
-        OPinv=sparse_linalg.LinearOperator((n, n), lambda v: project(inverse.solve(project(v))), dtype=np.float64),
+        OPinv=sparse_linalg.LinearOperator((n, n), inverse.solve, dtype=np.float64),  # in the complement (KKT)
     )  # fmt: skip
     order = np.argsort(values)
     vectors = (vectors[:, order].T * np.repeat(area, 3) ** -0.5).reshape(count, -1, 3)

@@ -231,7 +231,7 @@ class NewtonFinish:
 
         self.inverse.constrain(rigid)
         d, r = np.zeros_like(f), project(f)
-        z = project(self.inverse.solve(r))
+        z = self.inverse.solve(r)  # in the complement (KKT)
         p, rz, target = z.copy(), r @ z, KRYLOV_TOL * np.linalg.norm(r)
         for _ in range(KRYLOV_ITERATIONS):
             q = project(self.hessian_action(x, p) + self.shift * p)
@@ -244,7 +244,7 @@ class NewtonFinish:
             if np.linalg.norm(r) <= target:
                 self.krylov_steps += 1
                 return d
-            z = project(self.inverse.solve(r))
+            z = self.inverse.solve(r)
             rz, rz_old = r @ z, rz
             p = z + (rz / rz_old) * p
         return None

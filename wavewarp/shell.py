@@ -126,11 +126,11 @@ class Shell:
                 self._entry_triangle = wp.array(triangle, dtype=wp.int32)
             else:
                 self._jets = wp.zeros((1, 6), dtype=self.vec3)
-        self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
         self.revision = 0  # counts changes of V̄ and of the terms: captured steps re-capture (device.run_steps)
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
+        self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
         self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
         self.newton_steps = 0  # Newton steps of the last relaxation
         self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
