@@ -70,7 +70,8 @@ from wavewarp.quadrature import triangle_rule
 from wavewarp.scene import ArrivalTimes, load_scene, mean_edge, resolve
 from wavewarp.shell import RelaxationError, Shell
 from wavewarp.walker import nearest_vertex
-from wavewarp.waves import FitzHughNagumo, Telegraph, gaussian_pulse
+from wavewarp.initial import gaussian_pulse
+from wavewarp.waves import FitzHughNagumo, Telegraph
 
 CASES = ("spectrum", "telegraph", "radius", "arrival", "front")
 METHODS = (("subdivision", 0), ("subdivision", 2), ("p1", 0))  # (discretization, mass corrections)

@@ -38,7 +38,8 @@ from wavewarp.device import describe_device, device_tag
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
-from wavewarp.waves import FitzHughNagumo, Telegraph, gaussian_pulse
+from wavewarp.initial import gaussian_pulse
+from wavewarp.waves import FitzHughNagumo, Telegraph
 
 EXACT = np.concatenate([[l * (l + 1)] * (2 * l + 1) for l in range(7)])
 STEPPERS = (("subdivision", 0), ("subdivision", 2), ("p1", 0))  # telegraph: (discretization, mass corrections)

@@ -5,10 +5,11 @@
 
 Runs the sphere and prism walkers, each deformation-sensitive and -insensitive (the twin whose
 wave runs on the rest shell), over `--periods` FHN periods (default 6) at the scenes' defaults
-(`--set` overrides apply to every run). Writes locomotion.json: the device, the date and a list of runs
-with `scene`, `sensitive`, `period` (T, measured), `speed_R_per_T`, `distance_R`,
-`pulse_displacements_R`, `pulse_alignment`, `lateral_R`, `sag_R`, the resolved parameters and
-the wall time; and locomotion.png, the forward displacement in R against t/T (Fig. 3a: sensitive
+(`--set` overrides apply to every run). Writes locomotion.json: the device, the date, the twins' ratios per scene
+(`twins`: T and the first front's mean arrival, sensitive over insensitive; the speed, insensitive
+over sensitive) and a list of runs with `scene`, `sensitive`, `period` (T, measured),
+`speed_R_per_T`, `distance_R`, `pulse_displacements_R`, `pulse_alignment`, `lateral_R`, `sag_R`,
+`first_front_mean_arrival`, `total_concentration_error`, the resolved parameters and the wall time; and locomotion.png, the forward displacement in R against t/T (Fig. 3a: sensitive
 solid, insensitive dashed). `--quick`: coarse meshes over 2.2 periods (a CPU smoke run).
 """
 
@@ -39,6 +40,22 @@ def run_walker(scene: str, sensitive: bool, *, device, periods: float, overrides
     summary = {"scene": scene, "sensitive": sensitive, **run.measurements(), "wall_time_s": time.perf_counter() - start,
                "parameters": run.resolved}  # fmt: skip
     return summary, run
+
+
+def twin_ratios(pair: list) -> dict:
+    """Sensitive over insensitive: the period T, the first front's mean arrival over the shell (the
+    mechanical feedback on the wave) and, insensitive over sensitive, the speed (Fig. 3a's ratio)."""
+    runs = {r["sensitive"]: r for r in pair}
+    if set(runs) != {True, False}:
+        return {}
+
+    def ratio(name, top, bottom):
+        a, b = runs[top].get(name), runs[bottom].get(name)
+        return a / b if a is not None and b else None
+
+    return {"period_sensitive_over_insensitive": ratio("period", True, False),
+            "arrival_sensitive_over_insensitive": ratio("first_front_mean_arrival", True, False),
+            "speed_insensitive_over_sensitive": ratio("speed_R_per_T", False, True)}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -74,13 +91,13 @@ def main(argv=None) -> int:
             print(f"{scene:14s} {'sensitive' if sensitive else 'insensitive':11s} T = {summary['period'] or float('nan'):7.2f}"
                   f"  speed = {speed if speed is not None else float('nan'):+.4f} R/T  distance = {summary['distance_R']:+.4f} R"
                   f"  ({summary['wall_time_s']:.1f} s)", flush=True)  # fmt: skip
-    for scene in args.scenes:
-        pair = {r["sensitive"]: r["speed_R_per_T"] for r in runs if r["scene"] == scene}
-        if pair.get(True) and pair.get(False) is not None:
-            print(f"{scene}: insensitive / sensitive speed = {pair[False] / pair[True]:.3f}")
+    twins_measured = {scene: twin_ratios([r for r in runs if r["scene"] == scene]) for scene in args.scenes}
+    for scene, ratios in twins_measured.items():
+        if ratios:
+            print(f"{scene}: " + ", ".join(f"{name} {value:.4f}" for name, value in ratios.items() if value is not None))
     result = {"benchmark": "locomotion", "device": str(device), "device_name": wp.get_device(device).name,
               "host": platform.node(), "date": date.today().isoformat(), "quick": args.quick, "periods": periods,
-              "runs": runs}  # fmt: skip
+              "twins": twins_measured, "runs": runs}  # fmt: skip
     write_json(os.path.join(args.out, "locomotion.json"), result)
     locomotion_png(lines, os.path.join(args.out, "locomotion.png"),
                    title=f"walkers, {wp.get_device(device).name}: displacement against time (Fig. 3a)")  # fmt: skip

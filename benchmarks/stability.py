@@ -69,7 +69,8 @@ from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.shell import RelaxationError, Shell
-from wavewarp.waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, gaussian_pulse
+from wavewarp.initial import gaussian_pulse
+from wavewarp.waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph
 
 NOISE = 1e-3  # amplitude of the random initial chemistry
 STEPS = {"telegraph": 2000, "fhn-explicit": 5000, "fhn-imex": 2000, "dynamics": 2000}

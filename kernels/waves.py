@@ -50,23 +50,29 @@ def fhn_reaction(c: Any, nu: Any):
 
 @wp.kernel
 def fhn_explicit_kernel(
-    acceleration: wp.array(dtype=Any), gamma2: Any, nu: Any, kappa: Any, epsilon: Any, dt: Any,
-    c: wp.array(dtype=Any), w: wp.array(dtype=Any),
+    acceleration: wp.array(dtype=Any), mass: wp.array(dtype=Any), gamma2: Any, nu: Any, kappa: Any, epsilon: Any,
+    dt: Any, c: wp.array(dtype=Any), w: wp.array(dtype=Any), produced: wp.array(dtype=Any),
 ):  # fmt: skip
-    """Explicit Euler: c += dt (-γ² M̃⁻¹Kc + f(c) - w);  w += dt ε (c - κ w), both from step n."""
+    """Explicit Euler: c += dt (-γ² M̃⁻¹Kc + f(c) - w);  w += dt ε (c - κ w), both from step n.
+    `produced` gains the amount the reaction adds, dt M (f(c) - w) (diffusion adds none: 1ᵀK = 0)."""
     i = wp.tid()
     ci = c[i]
     wi = w[i]
-    c[i] = ci + dt * (fhn_reaction(ci, nu) - wi - gamma2 * acceleration[i])
+    reaction = fhn_reaction(ci, nu) - wi
+    c[i] = ci + dt * (reaction - gamma2 * acceleration[i])
     w[i] = wi + dt * epsilon * (ci - kappa * wi)
+    produced[i] = produced[i] + dt * mass[i] * reaction
 
 
 @wp.kernel
-def fhn_imex_rhs_kernel(c: wp.array(dtype=Any), w: wp.array(dtype=Any), mass: wp.array(dtype=Any), nu: Any, dt: Any, rhs: wp.array(dtype=Any)):
-    """Right-hand side of (M + dt γ² K) c^{n+1} = M (c^n + dt (f(c^n) - w^n))."""
+def fhn_imex_rhs_kernel(c: wp.array(dtype=Any), w: wp.array(dtype=Any), mass: wp.array(dtype=Any), nu: Any, dt: Any,
+                        rhs: wp.array(dtype=Any), produced: wp.array(dtype=Any)):  # fmt: skip
+    """Right-hand side of (M + dt γ² K) c^{n+1} = M (c^n + dt (f(c^n) - w^n)); `produced` gains dt M (f - w)."""
     i = wp.tid()
     ci = c[i]
-    rhs[i] = mass[i] * (ci + dt * (fhn_reaction(ci, nu) - w[i]))
+    source = dt * mass[i] * (fhn_reaction(ci, nu) - w[i])
+    rhs[i] = mass[i] * ci + source
+    produced[i] = produced[i] + source
 
 
 @wp.kernel
@@ -74,6 +80,29 @@ def fhn_inhibitor_kernel(c: wp.array(dtype=Any), epsilon: Any, kappa: Any, dt: A
     """Implicit in w: w^{n+1} = (w^n + dt ε c^{n+1}) / (1 + dt ε κ) (unconditionally stable)."""
     i = wp.tid()
     w[i] = (w[i] + dt * epsilon * c[i]) / (type(dt)(1.0) + dt * epsilon * kappa)
+
+
+@wp.kernel
+def transport_kernel(old_mass: wp.array(dtype=Any), mass: wp.array(dtype=Any), values: wp.array(dtype=Any)):
+    """Conservative transport across a surface move: each vertex keeps its amount M_I c_I, so
+    c_I ← c_I M_I(old) / M_I(new) (an amount per unit current area; SPEC §5, docs/chemistry.md)."""
+    i = wp.tid()
+    values[i] = values[i] * (old_mass[i] / mass[i])
+
+
+@wp.kernel
+def first_crossing_kernel(c: wp.array(dtype=Any), level: Any, step: wp.array(dtype=wp.int32),
+                          first_step: wp.array(dtype=wp.int32)):  # fmt: skip
+    """first_step[i] = step[0] at the first step where c_i reaches `level` (-1 until then): the
+    first front's arrival at each vertex, recorded inside the captured steps."""
+    i = wp.tid()
+    if first_step[i] < 0 and c[i] >= level:
+        first_step[i] = step[0]
+
+
+@wp.kernel
+def count_step_kernel(step: wp.array(dtype=wp.int32)):
+    step[0] = step[0] + 1
 
 
 @wp.kernel
@@ -182,9 +211,11 @@ def cg_failed_kernel(rz: wp.array(dtype=Any), rz_stop: wp.array(dtype=Any), flag
 
 _S = "scalar[]"
 declare_overloads(telegraph_kernel, acceleration=_S, gamma2="scalar", damping="scalar", dt="scalar", c=_S, v=_S)
-declare_overloads(fhn_explicit_kernel, acceleration=_S, gamma2="scalar", nu="scalar", kappa="scalar", epsilon="scalar",
-                  dt="scalar", c=_S, w=_S)  # fmt: skip
-declare_overloads(fhn_imex_rhs_kernel, c=_S, w=_S, mass=_S, nu="scalar", dt="scalar", rhs=_S)
+declare_overloads(fhn_explicit_kernel, acceleration=_S, mass=_S, gamma2="scalar", nu="scalar", kappa="scalar",
+                  epsilon="scalar", dt="scalar", c=_S, w=_S, produced=_S)  # fmt: skip
+declare_overloads(fhn_imex_rhs_kernel, c=_S, w=_S, mass=_S, nu="scalar", dt="scalar", rhs=_S, produced=_S)
+declare_overloads(transport_kernel, old_mass=_S, mass=_S, values=_S)
+declare_overloads(first_crossing_kernel, c=_S, level="scalar")
 declare_overloads(fhn_inhibitor_kernel, c=_S, epsilon="scalar", kappa="scalar", dt="scalar", w=_S)
 declare_overloads(runaway_kernel, values=_S, limit="scalar")
 declare_overloads(flip_kernel, c=_S, floor="scalar", hold="scalar", previous=_S, increment=_S, earlier=_S)

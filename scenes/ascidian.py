@@ -9,18 +9,16 @@ PARAMETERS = {
     "AC": Param(1.5, "metric coupling (SPEC §6)"),
     "AI": Param(1.6, "curvature coupling (SPEC §6)"),
     "mu_v": Param(24.0, "volume penalty μV in units of Y h / R⁴ (SPEC §6)", minimum=0.0),
-    # the wave alone would take level 3 (pulse shape 0.8%; BENCHMARKS.md "Accuracy"), but the contraction
-    # reaches 65% of R, and level 3's shell differs from level 4's by 0.7–1.9% R over the pass
-    "level": Param(4, "icosphere level: 5120 triangles, 8 control edges per pulse width; the shell's shape "
-                   "needs it (level 3: 0.7–1.9% R off level 4)", minimum=1),
-    # the paper's σ² = 2/R² fixes the width only in its unstated length unit; read with our R = 10 (√2, R/7)
-    # the shell buckles at t ≈ 8 and goes lopsided, against Fig. 1a. R/2 is the narrowest width of our scan
-    # (3.5–5.66) that keeps it axisymmetric until the wave converges on the antipode (docs/scenes.md)
-    "width": Param(5.0, "pulse width σR in length units: R/2 at the default R, which keeps the shell "
-                   "axisymmetric as in Fig. 1a (√2, the starfish's, buckles it at t ≈ 8)", positive=True),
+    # the starfish's resolution; the early 4-fold wrinkle at 30° (t = 0.3–1.7) is the same at level 5
+    "level": Param(4, "icosphere level: 5120 triangles, 2.3 control edges per pulse width (the early wrinkle's "
+                   "mode and size match level 5's)", minimum=1),
+    "t_end": Param(0.0, "end time; 0 = 0.73 π R / γ, the front ~160° from the pole: focusing on the antipode, the "
+                   "conserved chemical contracts the shell past its last equilibrium there (docs/scenes.md)",
+                   minimum=0.0),  # fmt: skip
 }
+END_FRACTION = 0.73  # of the pole-to-pole time: the last frames before the focus (area element 0.51 of rest at 0.73, 1/e at 0.76)
 QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3, coarser than the default
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
-    return sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, report=report)
+    return sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, report=report, end_fraction=END_FRACTION)

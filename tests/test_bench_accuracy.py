@@ -42,6 +42,7 @@ def pairs_by_dtype(points):
     return [(d["float32"], d["float64"]) for d in by.values() if len(d) == 2]
 
 
+@pytest.mark.slow  # runs the quick benchmark
 def test_writes_the_json_and_one_chart_per_case(bench):
     out, result = bench
     assert result["benchmark"] == "accuracy" and result["device"] == "cpu" and result["quick"]
@@ -54,6 +55,7 @@ def test_writes_the_json_and_one_chart_per_case(bench):
             assert {p["dtype"] for p in points} == {"float32", "float64"}
 
 
+@pytest.mark.slow  # runs the quick benchmark
 def test_the_pareto_front_holds_exactly_the_undominated_points(bench):
     _, result = bench
     for case in CONFIGURATIONS:
@@ -65,6 +67,7 @@ def test_the_pareto_front_holds_exactly_the_undominated_points(bench):
                 assert p["pareto"] == (usable(p) and not dominated), (case, p)
 
 
+@pytest.mark.slow  # runs the quick benchmark
 def test_errors_fall_as_the_level_rises(bench):
     """The sphere spectrum (every operator, rule and dtype) and the uniform-c radius (float64, rule 3,
     every family) converge: level 3 beats level 2."""
@@ -79,6 +82,7 @@ def test_errors_fall_as_the_level_rises(bench):
         assert errors[3] < errors[2], (family, errors)
 
 
+@pytest.mark.slow  # runs the quick benchmark
 def test_float32_errors_stay_within_stated_bounds_of_float64(bench):
     """float32 round-off is far below the discretisation errors: the float32-built operator has the
     same spectrum to 1e-3 of its error, the waves' errors agree to 1e-3 (of the scale, of γ, of the
@@ -106,6 +110,7 @@ def test_the_1d_front_reference_is_the_bistable_speed_without_w():
     assert 3.5 < bare["ratio"] < 4.5 and abs(bare["richardson"]) < 5e-3 * bare["speed"]
 
 
+@pytest.mark.slow  # runs the quick benchmark
 def test_the_front_case_reports_stalls_and_a_travelling_front(bench):
     """Quick sweep (levels 3 and 5, lumped): every point is measured against the bench's 1-D
     reference; a stalled front is speed 0 and error 1 (no crash); level 5, where the lattice no
@@ -148,6 +153,7 @@ def test_the_exact_telegraph_modes_solve_their_equations():
     np.testing.assert_allclose((c(h) - c(-h)) / (2 * h), b, atol=1e-7)
 
 
+@pytest.mark.slow  # runs the quick benchmark
 def test_recommendations_are_the_cheapest_selectable_points_below_tolerance(bench):
     """Re-derived from the points: every scene is covered; a recommended setting meets its tolerance,
     is float32 whenever a float32 point the scene can select meets it, and no such point is cheaper."""

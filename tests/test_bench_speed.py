@@ -7,6 +7,7 @@ import pytest
 from wavewarp.cli import main as cli
 
 
+@pytest.mark.slow
 def test_bench_speed_quick_writes_json_and_chart(tmp_path):
     assert cli(["bench", "speed", "--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "speed_cpu.json").read_text())

@@ -19,6 +19,7 @@ RESOLUTION = 0.005  # bisection width, relative to the predicted bound
 NU = -0.01  # SPEC §5, the benchmark's FHN
 
 
+@pytest.mark.slow
 def test_quick_benchmark_writes_its_table_and_chart(tmp_path):
     assert cli(["bench", "stability", "--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     with open(tmp_path / "stability_cpu_quick.json") as f:

@@ -49,6 +49,7 @@ def critical_fraction(mesh, thickness):
     return p1 - v1 * (p2 - p1) / (v2 - v1), degree
 
 
+@pytest.mark.slow
 def test_softest_modes_buckle_a_pressurised_sphere_at_zoellys_pressure_in_the_thin_limit():
     """Known in advance: p_cr = 2 Y h² / (R² √(3(1 − ν²))) with critical degree
     ℓ(ℓ+1) ≈ √(12(1 − ν²)) R/h, the thin-shell limit. Its error is O(h/R) (the modes' 1/ℓ² ~ h/R):

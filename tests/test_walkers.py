@@ -32,7 +32,8 @@ def kinetic_period_by_euler(nu=-0.01, kappa=1e-4, epsilon=0.005, dt=0.01, t_end=
 
 
 def walk(scene, **overrides):
-    """A walker run through the scene API; returns the run after all its frames."""
+    """A scene's run (a walker's, or any scene's) through the scene API, quick settings under `overrides`;
+    returns the run after all its frames, each recorded."""
     module = load_scene(scene)
     p = resolve(module.PARAMETERS, module.QUICK, [f"{k}={v}" for k, v in overrides.items()])
     run = module.build(p, device="cpu", report=lambda message: None)
@@ -45,13 +46,14 @@ def walk(scene, **overrides):
 
 def test_sphere_walker_quick_run_writes_the_walker_outputs(tmp_path, capsys):
     """SPEC §9: velocities and inhibitor frames, /World/Ground, the locomotion measurements in
-    --json and the HDF5 attributes; the measured period is the FHN kinetics' own (the origin is the
-    pacemaker: its oscillation is the limit cycle), computed here independently."""
+    --json and the HDF5 attributes. On the insensitive twin the measured period is the FHN kinetics'
+    own (the origin is the pacemaker: its oscillation is the limit cycle), computed here
+    independently; the sensitive shell's contraction shortens it (tests/test_transport.py)."""
     from pxr import Usd, UsdGeom
 
     out, h5 = tmp_path / "walk.usda", tmp_path / "walk.h5"
     code, stdout, err = run_cli(capsys, "sphere-walker", "--quick", "--device", "cpu", "--out", str(out), "--h5", str(h5),
-                                "--json")  # fmt: skip
+                                "--set", "sensitive=false", "--json")  # fmt: skip
     assert code == 0, err
     result = json.loads(stdout)
     assert result["period"] == pytest.approx(kinetic_period_by_euler(), rel=0.01)
@@ -91,6 +93,8 @@ def test_resumed_walker_continues_the_same_trajectory(tmp_path, capsys):
         assert b["frames/time"].shape == a["frames/time"].shape
         assert np.abs(b["frames/positions"][-1] - a["frames/positions"][-1]).max() < 1e-9 * 25
         assert np.abs(b["frames/trace"][-1] - a["frames/trace"][-1]).max() < 1e-9 * 25
+        np.testing.assert_array_equal(b["frames/first_arrival"][-1], a["frames/first_arrival"][-1])
+        assert b["frames/reaction_amount"][-1] == pytest.approx(a["frames/reaction_amount"][-1], rel=1e-12)
 
 
 @pytest.mark.parametrize("scene", ["sphere-walker", "prism-walker"])
@@ -106,6 +110,7 @@ def test_mirrored_origin_mirrors_the_walk(scene):
     assert np.abs(com[0][:, 1]).max() < 1e-8 * scale
 
 
+@pytest.mark.slow
 def test_overdamped_walker_moves_only_as_far_as_friction_can_drag_it():
     """`mechanics=overdamped` (the mobility model, docs/walkers.md "Which mechanics"): the drag is
     2 η_ground by default, and the centre of mass moves at (net external force)/(ζ ΣM), whose
@@ -181,6 +186,7 @@ def test_steps_past_a_frame_leave_the_trace_buffer_alone():
     np.testing.assert_allclose(run._frame_trace[-1, 2:5], run.dynamics.center_of_mass(), rtol=1e-12, atol=1e-12)  # t, c, centre
 
 
+@pytest.mark.slow
 def test_bench_locomotion_quick_writes_json_and_chart(tmp_path):
     from wavewarp.cli import main as cli
 
@@ -235,7 +241,8 @@ def small_walking(check_every, speed_limit=None, sensitive=True, make_wave=None)
     from wavewarp.laplace import LaplaceBeltrami
     from wavewarp.mesh import Mesh, icosphere
     from wavewarp.shell import Shell
-    from wavewarp.waves import FitzHughNagumo, gaussian_pulse
+    from wavewarp.initial import gaussian_pulse
+    from wavewarp.waves import FitzHughNagumo
 
     mesh = icosphere(1.0, 1)
     mesh = Mesh(mesh.vertices + [0.0, 0.0, 0.95], mesh.triangles)
@@ -330,3 +337,26 @@ def test_reference_ramp_removes_the_kick_of_each_chemistry_step():
     for name in ("ref_metric", "ref_curvature", "ref_weight"):
         a, b = (getattr(runs[ramp].shell, name).numpy() for ramp in (True, False))
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)
+
+
+def test_first_arrival_is_the_first_step_each_vertex_reaches_half():
+    """The device's first-front record (inside the steps, as the walkers capture it) against the
+    first crossing of c = 0.5 found here from the state read after every step."""
+    from wavewarp.balance import FirstArrival
+    from wavewarp.initial import gaussian_pulse
+    from wavewarp.laplace import LaplaceBeltrami
+    from wavewarp.mesh import icosphere
+    from wavewarp.waves import FitzHughNagumo
+
+    op = LaplaceBeltrami(icosphere(1.0, 2), device="cpu", dtype="float64")
+    c0, _ = gaussian_pulse(op, 0, 0.3, gamma=0.2)
+    wave = FitzHughNagumo(op, 0.2, c0=c0, dt=0.5, mass_corrections=0)
+    arrival = FirstArrival(c0, device="cpu", scalar=op.scalar)
+    first = np.where(c0 >= 0.5, 0.0, -1.0)
+    for n in range(1, 25):
+        wave.advance(1)
+        arrival.launch(wave.c)
+        c = wave.concentration()
+        first[(first < 0) & (c >= 0.5)] = (n - 0.5) * wave.dt
+    assert (first == 0).any() and (first > 0).sum() > 10 and (first < 0).any()  # started, spread, not everywhere
+    np.testing.assert_array_equal(arrival.times(wave.dt), first)

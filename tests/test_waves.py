@@ -26,9 +26,8 @@ from wavewarp.waves import (
     OscillationError,
     Telegraph,
     TimeStepError,
-    gaussian_pulse,
-    steady_front,
 )
+from wavewarp.initial import gaussian_pulse, steady_front
 
 F64 = dict(device="cpu", dtype="float64")
 

@@ -19,7 +19,8 @@ from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
 from .modes import azimuthal_order, softest_modes  # noqa: E402
 from .self_contact import SelfContact  # noqa: E402
 from .shell import RelaxationError, Shell  # noqa: E402
-from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, gaussian_pulse, steady_front  # noqa: E402
+from .initial import gaussian_pulse, steady_front  # noqa: E402
+from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph  # noqa: E402
 
 __all__ = [
     "BlowUpError", "FitzHughNagumo", "Ground", "LaplaceBeltrami", "LimitSurface", "Mesh", "OscillationError",

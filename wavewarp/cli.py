@@ -64,7 +64,7 @@ def _scene_run(args) -> int:
 
     from .io import check_writable
     from .mesh import load
-    from .scene import load_scene, resolve
+    from .scene import load_scene, resolve, resumed
     from .shell import RelaxationError
     from .trajectory import TrajectoryWriter, last_frame
     from .usd import UsdAnimation
@@ -80,8 +80,8 @@ def _scene_run(args) -> int:
             raise ValueError(f"--set cannot be combined with --resume: the run continues with the parameters stored in {args.h5}")
         import h5py
 
-        with h5py.File(args.h5, "r") as f:  # a parameter newer than the file takes its default
-            p = {**resolve(module.PARAMETERS), **json.loads(f.attrs["parameters"])}
+        with h5py.File(args.h5, "r") as f:  # a parameter newer than the file: the value such files ran with
+            p = resumed(module.PARAMETERS, json.loads(f.attrs["parameters"]))
         frames = _all_frames(args.h5)
     else:
         p = resolve(module.PARAMETERS, getattr(module, "QUICK", {}) if args.quick else None, args.set)

@@ -8,8 +8,10 @@ One `QuasiStatic.step()`:
 2. the shell's active reference ā, b̄ follows the new control concentrations (device to device);
 3. `relax` finds the new quasi-static equilibrium, warm-started from the last one (one captured
    device loop, positions device to device: wavewarp/relax.py);
-4. deformation-sensitive runs move the wave's operator to the new surface (`update`), which
-   makes the wave re-check its time step; the insensitive twin keeps the rest surface.
+4. deformation-sensitive runs move the wave to the new surface (`move_surface`: the chemical is
+   carried by the material, conservatively by default), which makes the wave re-check its time
+   step; the insensitive twin keeps the rest surface. The equilibrium at t = 0 only places the
+   operator: the initial values are the concentrations on that surface.
 
 State (positions, the wave's c and its velocity or inhibitor), model (Shell, LaplaceBeltrami)
 and stepper stay apart: the coupled steppers only sequence them.
@@ -72,7 +74,7 @@ class QuasiStatic:
         self._x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
         self.relax_iterations = []
         self.round_off_stops = 0  # relaxations accepted at the round-off floor, within ROUND_OFF_SLACK × tol
-        self._equilibrate()
+        self._equilibrate(initial=True)
 
     @property
     def time(self) -> float:
@@ -82,7 +84,7 @@ class QuasiStatic:
         """(V, 3) control positions of the current equilibrium."""
         return self._x.numpy().astype(np.float64)
 
-    def _equilibrate(self) -> None:
+    def _equilibrate(self, initial: bool = False) -> None:
         self.shell.update_reference(self.wave.c)
         try:
             relax(self.shell, self._x, self.tol, self.max_iterations, out=self._x, method=self.method,
@@ -99,8 +101,10 @@ class QuasiStatic:
             self._x.assign(error.x.astype(self.shell._real))
         self.relax_iterations.append(len(self.shell.relax_history) - 1)
         self.newton_finishes += self.shell.newton_steps > 0
-        if self.sensitive:
+        if self.sensitive and initial:
             self.operator.update(self._x)
+        elif self.sensitive:
+            self.wave.move_surface(self._x)
 
     def restore(self, x) -> None:
         """Set the equilibrium positions (resuming a run); the wave's operator follows if sensitive."""
@@ -125,8 +129,8 @@ class Walking:
        reference follows c⁰ + (k/substeps)(c¹ - c⁰) (`ramp`, the default; device to device), or
        jumps to c¹ before the first (`ramp=False`: each chemistry step then kicks the shell's stiffest
        modes, docs/walkers.md "Reference ramp");
-    4. deformation-sensitive runs move the wave's operator to the new positions; the insensitive
-       twin keeps the rest surface (M and K fixed);
+    4. deformation-sensitive runs move the wave to the new positions (`move_surface`, which carries
+       the chemical with the material); the insensitive twin keeps the rest surface (M and K fixed);
     5. `recorder()`, if given, launches device-only work (e.g. a trace row).
 
     `advance(steps)` runs chunks of up to `check_every` coupled steps with no host round-trip (one
@@ -182,7 +186,7 @@ class Walking:
                 self.shell.update_reference(self._c_ramp)
             self.dynamics._step()
         if self.sensitive:
-            self.operator.update(self.dynamics.x)
+            self.wave.move_surface(self.dynamics.x)
         if self.recorder is not None:
             self.recorder()
 
@@ -212,7 +216,7 @@ class Walking:
             if failure is None:
                 failure = dynamics.runaway(dynamics.time, chunk * wave.dt)
             if failure is None and self.sensitive:
-                self.operator.update(dynamics.x)  # a graph replay moved the surface without a new `version`
+                self.operator.moved_on_device()  # a graph replay moved the surface without a new `version`
                 try:
                     wave._refresh()  # the surface moved: λ_max on the new surface, against the fixed dt
                 except TimeStepError as error:

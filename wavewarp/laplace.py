@@ -158,6 +158,11 @@ class LaplaceBeltrami:
             self._assemble()
         self.version += 1
 
+    def moved_on_device(self) -> None:
+        """A captured graph's replay ran `update` on the device: take a new `version`, so that what the host
+        derives from the surface (the wave's stability bound, the consistent mass) is refreshed."""
+        self.version += 1
+
     def _assemble(self) -> None:
         """K's off-diagonal entries into the CSR pattern."""
         self._values.zero_()

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .balance import ChemicalBalance
 from .coupled import QuasiStatic
 from .laplace import J_FLOOR, LaplaceBeltrami
 from .mesh import Mesh
@@ -23,7 +24,8 @@ from .relax import NEWTON_STEPS
 from .self_contact import SelfContact
 from .shell import Shell
 from .unfolding import first_arrival
-from .waves import BlowUpError, Telegraph, TimeStepError, gaussian_pulse, steady_front
+from .initial import gaussian_pulse, steady_front
+from .waves import TRANSPORTS, BlowUpError, Telegraph, TimeStepError, telegraph_total
 
 
 class SceneError(ValueError):
@@ -32,13 +34,15 @@ class SceneError(ValueError):
 
 @dataclass(frozen=True)
 class Param:
-    """One scene parameter: its default (which fixes its type), why, and what values are valid."""
+    """One scene parameter: its default (which fixes its type), why, and what values are valid.
+    `legacy`: the value a trajectory written before the parameter existed ran with (used on resume)."""
 
     default: object
     help: str
     choices: tuple = ()
     positive: bool = False
     minimum: float | None = None
+    legacy: object = None
 
     def parse(self, name: str, text):
         kind = type(self.default)
@@ -80,6 +84,14 @@ def resolve(parameters: dict, quick: dict | None = None, overrides=()) -> dict:
     return values
 
 
+def resumed(parameters: dict, stored: dict) -> dict:
+    """The parameters of a run resumed from a trajectory that stored `stored`: a parameter newer than
+    the file takes the value such files ran with (`Param.legacy`), else its default."""
+    values = resolve(parameters)
+    values.update({name: param.legacy for name, param in parameters.items() if param.legacy is not None})
+    return {**values, **stored}
+
+
 def load_scene(name_or_path: str):
     """The scene module: a name from `wavewarp.scenes` or the path of a scene script."""
     if name_or_path.endswith(".py") or os.sep in name_or_path:
@@ -103,6 +115,11 @@ def load_scene(name_or_path: str):
 
 # ---------------------------------------------------------------- parameters shared by the telegraph scenes
 
+TRANSPORT = Param("conservative", "how the chemical moves with a deforming shell (sensitive runs): conservative "
+                  "keeps each vertex's amount M c, so ∫ c dω obeys the equation (SPEC §5); material keeps the "
+                  "control values, which does not conserve it (docs/chemistry.md)", choices=TRANSPORTS,
+                  legacy="material")  # fmt: skip
+
 TELEGRAPH_PARAMETERS = {
     "young": Param(1.0, "Y sets the unit of stress (quasi-static: only ratios matter)", positive=True),
     "poisson": Param(0.33, "Poisson ratio, as in SPEC §9's Shell default"),
@@ -114,6 +131,7 @@ TELEGRAPH_PARAMETERS = {
                 minimum=0.0),  # fmt: skip
     "frames": Param(48, "frames written between t = 0 and t_end", minimum=1),
     "sensitive": Param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)"),
+    "transport": TRANSPORT,
     "mass_corrections": Param(0, "0 = lumped mass (SPEC §5); 2 = more accurate wave shapes (docs/chemistry.md)",
                               minimum=0),  # fmt: skip
     "relax_every": Param(0, "chemistry steps per relaxation; 0 = as many as keep the wave within half a "
@@ -209,12 +227,15 @@ class QuasiStaticWaveRun(WaveClock):
                 self.frames += 1
             dt = t_end / (self.frames * self.steps_per_frame)
         self.wave = Telegraph(self.operator, p["gamma"], p["alpha"], c0=c0, v0=v0, dt=dt,
-                              mass_corrections=p["mass_corrections"])  # fmt: skip
+                              mass_corrections=p["mass_corrections"], transport=p["transport"])  # fmt: skip
         budget = p["relax_iterations"] or CG_BUDGET[self.shell.device.is_cuda]
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p["sensitive"], chemistry_steps=relax_every,
                                    tol=p["relax_tol"] or None, max_iterations=budget, overdamped=p["overdamped"],
                                    method=p["relax_method"], newton_steps=p["newton_steps"])  # fmt: skip
         self.resolved = {**p, "dt": dt, "relax_every": relax_every, "frames": self.frames, "relax_iterations": budget}
+        # the telegraph invariant from the state at t = 0 (on the equilibrium surface)
+        self.invariant = (self.wave.total(), self.wave.total_rate(), p["alpha"], dt)
+        self.balance = ChemicalBalance(mesh, sensitive=p["sensitive"], rule=rule, device=device, dtype=dtype)
         self.series = {"positions": (mesh.n_vertices, 3), "concentration": (mesh.n_vertices,),
                        "concentration_rate": (mesh.n_vertices,)}  # fmt: skip
         # adaptive_dt: below a bound that the moving surface lowered, step at safety × the bound,
@@ -307,6 +328,7 @@ class QuasiStaticWaveRun(WaveClock):
         """Note a written frame for the figures (and, for frames read back on resume, the arrival times)."""
         if stored:
             self.arrival.update(frame["concentration"], time)
+        self.balance.record(time, frame["positions"], frame["concentration"], telegraph_total(*self.invariant, time))
         if self._profile is not None:
             self.profile_time = time
             self.profiles.append((time, self._profile(self, frame["positions"])))
@@ -320,7 +342,7 @@ class QuasiStaticWaveRun(WaveClock):
                "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
                "unconverged_relaxations": self.coupled.unconverged,
                "newton_finishes": self.coupled.newton_finishes,
-               "round_off_relaxations": self.coupled.round_off_stops}  # fmt: skip
+               "round_off_relaxations": self.coupled.round_off_stops, **self.balance.measurements()}  # fmt: skip
         if self.adaptive:
             out["chemistry_dt_changes"], out["chemistry_dt"] = self.dt_changes, self.wave.dt
         if self.shell.self_contact is not None:
@@ -356,8 +378,9 @@ SPHERE_PARAMETERS = parameters_with(
 
 
 def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initial=None, report=print,
-                    profile=None, measure=None, figures=None):  # fmt: skip
-    """A telegraph wave from the north pole of a quasi-static sphere (oocytes, buckling)."""
+                    profile=None, measure=None, figures=None, end_fraction=1.0):  # fmt: skip
+    """A telegraph wave from the north pole of a quasi-static sphere (oocytes, buckling); `t_end` 0
+    ends at `end_fraction` of the pole-to-pole time π R / γ."""
     from .mesh import icosphere
 
     R = p["radius"]
@@ -367,7 +390,7 @@ def sphere_wave_run(name: str, p: dict, *, mesh=None, device=None, seed=0, initi
         initial = {"kind": "gaussian", "sigma": p["width"] / R, "distance": "arc"}
     if p["noise"] > 0:  # an imperfection of the rest shape: perturbed positions alone relax back at t = 0
         mesh = Mesh(seeded_noise(mesh, p["noise"] * R, seed), mesh.triangles)
-    return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or math.pi * R / p["gamma"],
+    return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial, t_end=p["t_end"] or end_fraction * math.pi * R / p["gamma"],
                               device=device, profile=profile or oocyte_profile, measure=measure or oocyte_measurements,
                               figures=figures or {"kymograph": kymograph_png})  # fmt: skip
 
@@ -379,7 +402,8 @@ BOX_PARAMETERS = parameters_with(
     # SPEC §7 (eikonal); BENCHMARKS.md "Accuracy": lumped front speed 0.53% off the net's (16 divisions: 2.2%)
     divisions=Param(24, "control squares per face edge (even): 1.7 control edges per pulse width at L = 20",
                     minimum=2),
-    t_end=Param(0.0, "end time; 0 = 2 L / γ, past the face opposite the origin", minimum=0.0),
+    t_end=Param(0.0, "end time; 0 = 2.2 L / γ: past the face opposite the origin, until the fronts that meet "
+                "there have peaked (the imprint's arrival times need the peaks)", minimum=0.0),
     AC=Param(0.2, "metric coupling (SPEC §6)"),
     AI=Param(0.0, "curvature coupling (SPEC §6)"),
     mu_v=Param(0.0, "volume penalty μV in units of Y h / L⁴ (SPEC §6: none)", minimum=0.0),
@@ -591,7 +615,7 @@ def box_wave_run(name: str, p: dict, make_box, origins: dict, *, faces=None, fro
     if on_box:  # not a --mesh of another shape
         measure = lambda run: {**box_wave_measurements(run), **imprint_measurements(run, faces, fronts)}
         figures["imprint"] = lambda run, path: imprint_png(run, path, faces, fronts)
-    return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p["t_end"] or 2 * L / p["gamma"],
+    return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p["t_end"] or 2.2 * L / p["gamma"],
                               rule=p["rule"], device=device, measure=measure, figures=figures)  # fmt: skip
 
 
@@ -636,8 +660,9 @@ def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), ri
     rest = run.mesh.vertices
     theta = np.arccos(np.clip(rest @ run.origin / (np.linalg.norm(rest, axis=1) * np.linalg.norm(run.origin)), -1, 1))
     arrival = run.arrival.time
-    probe = (arrival > 0) & (theta > theta_range[0]) & (theta < theta_range[1])
-    if probe.sum() < 10 or run.time < R * theta_range[1] / run.p["gamma"]:
+    window = (theta > theta_range[0]) & (theta < theta_range[1])
+    probe = (arrival > 0) & window
+    if probe.sum() < 10 or probe.sum() < window.sum():  # the front has not crossed the whole window yet
         return {"wave_speed": None, "speed_nonlinearity": None, "arrival_spread": None}
     s, t = R * theta[probe], arrival[probe]
     slope, offset = np.polyfit(s, t, 1)
@@ -650,17 +675,20 @@ def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), ri
 
 
 def asymmetry_measurements(run) -> dict:
-    """The shell's largest shape asymmetry over the frames (shape_asymmetry: in R, and its mode) and
+    """The shell's largest shape asymmetry over the frames (shape_asymmetry: in R, and its mode),
     `axisymmetric_until`, the last frame time before one passes AXISYMMETRY_TOLERANCE (None if the
-    first does)."""
+    first does), and `asymmetric_between`, the first and last frame times past it (None if none is)."""
     times = [t for t, _ in run.profiles]
     values = [value[1] for _, value in run.profiles]
     if not values:
-        return {"shape_asymmetry": None, "shape_asymmetry_mode": None, "axisymmetric_until": None}
+        return {"shape_asymmetry": None, "shape_asymmetry_mode": None, "axisymmetric_until": None,
+                "asymmetric_between": None}  # fmt: skip
     k = int(np.argmax([amplitude for amplitude, _, _ in values]))
     broken = [j for j, (amplitude, _, _) in enumerate(values) if amplitude > AXISYMMETRY_TOLERANCE]
     until = times[-1] if not broken else (times[broken[0] - 1] if broken[0] > 0 else None)
-    return {"shape_asymmetry": values[k][0], "shape_asymmetry_mode": values[k][1], "axisymmetric_until": until}
+    between = [times[broken[0]], times[broken[-1]]] if broken else None
+    return {"shape_asymmetry": values[k][0], "shape_asymmetry_mode": values[k][1], "axisymmetric_until": until,
+            "asymmetric_between": between}  # fmt: skip
 
 
 def oocyte_profile(run, x) -> tuple:

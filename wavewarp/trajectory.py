@@ -2,8 +2,10 @@
 
 Schema: `/mesh/triangles` (T, 3), `/mesh/rest_positions` (V, 3); `/frames/time` (F,),
 `/frames/positions` (F, V, 3), `/frames/concentration` (F, V) and any further per-vertex
-series a scene records (`velocities` (F, V, 3), `inhibitor` (F, V), the walkers' `trace`
-(F, k, 5): time, c at the origin and centre of mass at the k chemistry steps up to each frame);
+series a scene records (`velocities` (F, V, 3), `inhibitor` (F, V); the walkers' `reaction_amount`
+(F,), the amount the reaction has added, `first_arrival` (F, V), each vertex's first-front arrival,
+and `trace` (F, k, 8): time, c at the origin, the centre of mass and the origin vertex's position at
+the k chemistry steps up to each frame);
 root attributes `scene`, `parameters` (JSON), `wavewarp_version`, `device`, and at the end of a
 run `measurements` (JSON) plus each numeric measurement under its own name (walkers: `period`,
 `distance_R`, `speed_R_per_T`, ...).

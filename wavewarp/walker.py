@@ -20,9 +20,11 @@ from .dynamics import Ground, OverdampedDynamics, ShellDynamics
 from .geometry import limit_positions
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh
-from .scene import Param, WaveClock, frame_png, mean_edge, scene_mesh
+from .balance import ChemicalBalance, FirstArrival, arrival_measurements
+from .scene import TRANSPORT, Param, WaveClock, frame_png, mean_edge, scene_mesh
 from .shell import Shell
-from .waves import FitzHughNagumo, fhn_kinetic_period, gaussian_pulse
+from .initial import gaussian_pulse
+from .waves import FitzHughNagumo, fhn_kinetic_period
 
 WALKER_PARAMETERS = {
     "young": Param(200.0, "Y (ours): the sphere walker's elastic sag under its weight is about 1% of R "
@@ -63,6 +65,7 @@ WALKER_PARAMETERS = {
     "periods": Param(4.0, "run length in periods T₀ of the FHN kinetics (SPEC values: T₀ = 275.8)", positive=True),
     "frames": Param(48, "frames written between t = 0 and the end", minimum=1),
     "sensitive": Param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)"),
+    "transport": TRANSPORT,
     "mirror": Param(False, "start the wave at the mirror image of the origin (x → -x): the walk must mirror"),
     "dtype": Param("float32", "float32 (default) or float64", choices=("float32", "float64")),
 }
@@ -151,7 +154,10 @@ class WalkerRun(WaveClock):
         width = p["width"] or 1.5 * mean_edge(mesh)
         c0, _ = gaussian_pulse(self.operator, self.origin_vertex, width / radius, gamma=p["gamma"], radius=radius)
         self.wave = FitzHughNagumo(self.operator, p["gamma"], p["nu"], p["kappa"], p["epsilon"], c0=c0, dt=p["dt"],
-                                   mass_corrections=p["mass_corrections"])  # fmt: skip
+                                   mass_corrections=p["mass_corrections"], transport=p["transport"])  # fmt: skip
+        self.initial_total = self.wave.total()
+        self.balance = ChemicalBalance(mesh, sensitive=p["sensitive"], rule=rule, device=device, dtype=dtype)
+        self.arrival = FirstArrival(c0, device=self.shell.device, scalar=self.shell.scalar)
         t_end = p["periods"] * self.period_kinetic
         self.steps_per_frame = max(1, round(t_end / p["frames"] / self.wave.dt))
         with wp.ScopedDevice(self.shell.device):
@@ -165,6 +171,7 @@ class WalkerRun(WaveClock):
                          "period_kinetic": self.period_kinetic}  # fmt: skip
         n = mesh.n_vertices
         self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
+                       "reaction_amount": (), "first_arrival": (n,),
                        "trace": (self.steps_per_frame, TRACE_COLUMNS)}  # fmt: skip
         self.field_range = (0.0, 1.0)
         self.ground_size = 8.0 * radius
@@ -190,10 +197,12 @@ class WalkerRun(WaveClock):
     def frame(self) -> dict:
         return {"positions": self.dynamics.positions(), "velocities": self.dynamics.velocities(),
                 "concentration": self.wave.concentration(), "inhibitor": self.wave.inhibitor(),
+                "reaction_amount": np.array(self.wave.produced()), "first_arrival": self.arrival.times(self.wave.dt),
                 "trace": self._frame_trace}  # fmt: skip
 
     def _record_trace_row(self) -> None:
         self.dynamics.launch_trace_row(self.wave.c, self.origin_vertex, self._trace_row, self._trace_rows)
+        self.arrival.launch(self.wave.c)
 
     def advance_frame(self) -> None:
         """One frame of coupled steps on the device; the trace rows (one per chemistry step) are read once."""
@@ -204,22 +213,27 @@ class WalkerRun(WaveClock):
         self._frame_trace = np.column_stack([times, self._trace_rows.numpy().astype(np.float64)])
 
     def restore(self, frame: dict) -> None:
-        """Continue from a saved frame (HDF5 resume): positions, velocities, c, w and the time."""
+        """Continue from a saved frame (HDF5 resume): positions, velocities, c, w, the reaction's amount and the time."""
         real, d = self.shell._real, self.dynamics
         d.x.assign(np.asarray(frame["positions"]).astype(real))
         d.v.assign(np.asarray(frame["velocities"]).astype(real))
         self.wave.c.assign(np.asarray(frame["concentration"]).astype(real))
         self.wave.w.assign(np.asarray(frame["inhibitor"]).astype(real))
+        self.wave.set_produced(float(frame["reaction_amount"]))
         self.wave.steps = int(round(frame["time"] / self.wave.dt))
         self.wave.time = self.wave.steps * self.wave.dt
+        self.arrival.restore(frame["first_arrival"], self.wave.steps, self.wave.dt)
         self.shell.update_reference(self.wave.c)
         if self.p["sensitive"]:
             self.operator.update(d.x)
         wp.synchronize_device(self.shell.device)
 
     def record(self, time: float, frame: dict, stored: bool = False) -> None:
-        """Append the frame's trace rows (new times only) and keep the snapshot for the rendered frame."""
+        """Append the frame's trace rows (new times only), check the chemical's balance (C(0) plus the
+        reaction's amount) and keep the snapshot for the rendered frame."""
         del stored  # written and resumed frames carry the same trace
+        self.balance.record(time, frame["positions"], frame["concentration"],
+                            self.initial_total + float(frame["reaction_amount"]))  # fmt: skip
         rows = np.asarray(frame["trace"])
         last = self.trace[-1, 0] if len(self.trace) else -np.inf
         self.trace = np.concatenate([self.trace, rows[rows[:, 0] > last + 1e-9 * self.wave.dt]])
@@ -229,7 +243,8 @@ class WalkerRun(WaveClock):
 
     def measurements(self) -> dict:
         return {"time": self.time, "mechanics_steps": self.steps * self.coupled.substeps,
-                "contact_depth_R": self.contact_depth / self.radius,
+                "contact_depth_R": self.contact_depth / self.radius, **self.balance.measurements(),
+                **arrival_measurements(self.arrival.times(self.wave.dt)),
                 **locomotion(self.trace, self.forward, self.radius, self.rest_height, self.period_kinetic)}  # fmt: skip
 
     def figures(self, stem: str) -> list:

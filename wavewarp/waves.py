@@ -18,6 +18,12 @@ bound is re-estimated whenever the operator's surface moves (`LaplaceBeltrami.up
 Mass: `mass_corrections=0` is the lumped mass of SPEC §5; p > 0 replaces M⁻¹ by W_p, p
 Richardson steps towards the consistent Galerkin mass (more accurate waves, smaller dt;
 docs/chemistry.md).
+
+Moving surface (SPEC §5 "Transport on the moving surface"): `move_surface(x)` moves the
+operator and, with `transport="conservative"` (default), carries the chemical with the material:
+every vertex keeps its amount M_I c_I (and M_I c_t, M_I w), so the discrete system is the
+evolving-surface Galerkin form d/dt(M c) = ... and Σ M_I c_I changes only through the equation's
+own terms. `transport="material"` keeps the control values instead (does not conserve C).
 """
 
 from __future__ import annotations
@@ -32,28 +38,22 @@ from .checks import count, finite, positive
 from .device import run_steps
 from .kernels import laplace as kernels_laplace
 from .kernels import waves as kernels_waves
-from .kernels.laplace import weighted_dot_kernel
 from .kernels.waves import (
     FLIP_FLOP,
-    cg_condition_kernel,
-    cg_direction_kernel,
-    cg_failed_kernel,
-    cg_start_kernel,
-    cg_step_kernel,
-    cg_stop_kernel,
     fhn_explicit_kernel,
     fhn_imex_rhs_kernel,
     fhn_inhibitor_kernel,
     flip_kernel,
-    inverse_diagonal_kernel,
     runaway_kernel,
-    shifted_operator_kernel,
     telegraph_kernel,
     telegraph_recentre_kernel,
+    transport_kernel,
 )
-from .laplace import DOT_STRIDE, LaplaceBeltrami
+from .laplace import LaplaceBeltrami
+from .shifted_solve import ShiftedMassSolver
 
 FHN_SCHEMES = ("explicit", "imex")
+TRANSPORTS = ("conservative", "material")
 # FHN flip detector (SPEC §8; docs/chemistry.md): a vertex stops the run after FLIP_STEPS steps in a
 # row whose increment d = c^{n+1} - c^n flips sign, exceeds FLIP_FLOOR × max(1, |c0|, |w0|) (float32
 # round-off and the CG tolerance stay below it) and keeps |d| >= FLIP_HOLD |d^{n-1}| (same phase, two
@@ -87,9 +87,13 @@ class _Stepper(ABC):
     scheme = ""
     bound_formula = ""
 
-    def __init__(self, operator, *, dt, safety, mass_corrections, check_dt, check_every, blowup_limit, capture):
+    def __init__(self, operator, *, dt, safety, mass_corrections, check_dt, check_every, blowup_limit, capture,
+                 transport):  # fmt: skip
         if not isinstance(operator, LaplaceBeltrami):
             raise ValueError(f"operator must be a wavewarp.LaplaceBeltrami, got {type(operator).__name__}")
+        if transport not in TRANSPORTS:
+            raise ValueError(f"transport must be one of {', '.join(TRANSPORTS)}, got {transport!r}")
+        self.transport = transport
         self.operator = operator
         self.device, self.scalar = operator.device, operator.scalar
         self._real = np.float32 if self.scalar == wp.float32 else np.float64
@@ -113,6 +117,7 @@ class _Stepper(ABC):
             self._flag = wp.zeros(1, dtype=wp.int32)
             self._stiffness_c = wp.empty(operator.n_vertices, dtype=self.scalar)
             self._acceleration = wp.empty(operator.n_vertices, dtype=self.scalar)
+            self._old_mass = wp.empty(operator.n_vertices, dtype=self.scalar)
 
     # ---------------------------------------------------------------- subclass interface
     @abstractmethod
@@ -130,6 +135,10 @@ class _Stepper(ABC):
     @abstractmethod
     def _watched(self) -> list:
         """Arrays checked for NaN/Inf and runaway values."""
+
+    @abstractmethod
+    def _transported(self) -> list:
+        """Arrays of amounts per unit area, carried by the material when the surface moves."""
 
     def _geometry_changed(self) -> None:
         """The surface moved and the bound and dt were refreshed (FHN IMEX rebuilds its preconditioner)."""
@@ -190,6 +199,21 @@ class _Stepper(ABC):
 
     def _recentre(self, old: float, new: float) -> None:
         """Move a staggered state from step `old` to step `new` (the leapfrog's half-step velocity)."""
+
+    # ---------------------------------------------------------------- moving surface
+    def move_surface(self, x) -> None:
+        """Move the operator to control positions `x` ((V, 3) NumPy or a wp.array of vec3 on the device)
+        and carry the chemical with it: "conservative" keeps every vertex's amount M_I c_I (c_I scales
+        by M_I(old) / M_I(new), likewise c_t and w), "material" keeps the control values. Device work
+        only: it may be captured inside a graph. The next step re-checks dt on the new surface."""
+        conservative = self.transport == "conservative"
+        if conservative:
+            wp.copy(self._old_mass, self.operator.mass_device)
+        self.operator.update(x)
+        if conservative:
+            for values in self._transported():
+                wp.launch(transport_kernel, dim=len(values), inputs=[self._old_mass, self.operator.mass_device],
+                          outputs=[values], device=self.device)  # fmt: skip
 
     # ---------------------------------------------------------------- stepping
     def _diffusion_acceleration(self, c: wp.array) -> None:
@@ -282,7 +306,7 @@ class _Stepper(ABC):
         return self.c.numpy().astype(np.float64)
 
     def total(self) -> float:
-        """C = ∫ c dω = Σ M_I c_I (lumped and consistent mass agree on it)."""
+        """C = ∫ c dω = Σ M_I c_I on the operator's surface (lumped and consistent mass agree on it)."""
         return float(self.operator.mass() @ self.concentration())
 
 
@@ -294,7 +318,10 @@ class Telegraph(_Stepper):
         v^{n+½} = [(1 - αdt/2) v^{n-½} - dt γ² M̃⁻¹K c^n] / (1 + αdt/2),   c^{n+1} = c^n + dt v^{n+½}
 
     stable while dt < 2 / (γ sqrt(λ_max(M̃⁻¹K))) for every α ≥ 0. `c0`, `v0` (V,) are control
-    values (see `gaussian_pulse`, `steady_front`); v^{½} = v0 + dt/2 (c_tt at t = 0).
+    values (see `gaussian_pulse`, `steady_front`); v^{½} = v0 + dt/2 (c_tt at t = 0). On a moving
+    surface (`move_surface`, conservative) this is the evolving-surface form
+    d²/dt²(M c) + α d/dt(M c) + γ² K c = 0 in the amounts M c, M v: Σ M v decays by
+    (1 - αdt/2)/(1 + αdt/2) per step and Σ M c follows it (`total_rate`, `telegraph_total`).
     No flip detector: the scheme is linear, so past the bound the top mode grows without limit
     (the runaway check stops it), and below it modes near ω dt = π alternate sign legitimately.
     """
@@ -303,9 +330,10 @@ class Telegraph(_Stepper):
     bound_formula = "dt < 2 / (γ sqrt(λ_max))"
 
     def __init__(self, operator, gamma, alpha=0.001, *, c0, v0=None, dt=None, safety=0.9, mass_corrections=0,
-                 check_dt=True, check_every=100, blowup_limit=None, capture=True):  # fmt: skip
+                 check_dt=True, check_every=100, blowup_limit=None, capture=True, transport="conservative"):  # fmt: skip
         super().__init__(operator, dt=dt, safety=safety, mass_corrections=mass_corrections, check_dt=check_dt,
-                         check_every=check_every, blowup_limit=blowup_limit, capture=capture)  # fmt: skip
+                         check_every=check_every, blowup_limit=blowup_limit, capture=capture,
+                         transport=transport)  # fmt: skip
         self.gamma = positive("gamma", gamma)
         self.alpha = finite("alpha", alpha)
         if self.alpha < 0:
@@ -348,9 +376,24 @@ class Telegraph(_Stepper):
     def _watched(self) -> list:
         return [self.c]
 
+    def _transported(self) -> list:
+        return [self.c, self.v]
+
     def velocity(self) -> np.ndarray:
         """(V,) the leapfrog velocity v^{n-½} = (c^n - c^{n-1}) / dt (control values)."""
         return self.v.numpy().astype(np.float64)
+
+    def total_rate(self) -> float:
+        """Σ M_I v_I: the rate C' of the total at t - dt/2 (the half step the leapfrog velocity belongs to)."""
+        return float(self.operator.mass() @ self.velocity())
+
+
+def telegraph_total(total: float, rate: float, alpha: float, dt: float, time: float) -> float:
+    """The telegraph invariant (SPEC §5): C(t) = C(0) + C'(0) (1 - e^{-αt}) / α, from C'' + α C' = 0, with
+    C(0) = `total` and C'(0) = `rate` e^{-α dt/2} from the leapfrog's rate Σ M v at t = -dt/2
+    (`Telegraph.total_rate` before the first step). Exact for the discrete system to O(α² dt²)."""
+    growth = time if alpha == 0 else -math.expm1(-alpha * time) / alpha
+    return total + rate * math.exp(-0.5 * alpha * dt) * growth
 
 
 def fhn_reaction_lipschitz(nu: float) -> float:
@@ -390,11 +433,13 @@ class FitzHughNagumo(_Stepper):
     dt < 2 / L_f (lumped mass only). Defaults are the SPEC's ν, κ, ε, γ; `w0` defaults to 0.
     Past the bound the cubic can hold the unstable mode in a bounded period-2 flip-flop instead of
     a blow-up: `flip_kernel` after each step catches it (OscillationError, module docstring).
+    On a moving surface (`move_surface`, conservative): d/dt(M c) + γ² K c = M r(c, w),
+    d/dt(M w) = M ε (c - κ w); `produced()` sums the reaction's amount, so C(t) = C(0) + produced().
     """
 
     def __init__(self, operator, gamma=0.2, nu=-0.01, kappa=1e-4, epsilon=0.005, *, c0, w0=None, dt=None,
                  scheme="explicit", safety=0.9, mass_corrections=0, tol=None, max_cg_iterations=500,
-                 check_dt=True, check_every=100, blowup_limit=None, capture=True):  # fmt: skip
+                 check_dt=True, check_every=100, blowup_limit=None, capture=True, transport="conservative"):  # fmt: skip
         if scheme not in FHN_SCHEMES:
             raise ValueError(f"scheme must be one of {', '.join(FHN_SCHEMES)}, got {scheme!r}")
         if scheme == "imex" and mass_corrections:
@@ -405,7 +450,8 @@ class FitzHughNagumo(_Stepper):
         if self.implicit and capture and operator.device.is_cuda and not wp.is_conditional_graph_supported():
             capture = False  # the CG loop needs conditional graph nodes (CUDA 12.4+) to be captured
         super().__init__(operator, dt=dt, safety=safety, mass_corrections=mass_corrections, check_dt=check_dt,
-                         check_every=check_every, blowup_limit=blowup_limit, capture=capture)  # fmt: skip
+                         check_every=check_every, blowup_limit=blowup_limit, capture=capture,
+                         transport=transport)  # fmt: skip
         self.gamma = positive("gamma", gamma)
         self.nu, self.kappa = finite("nu", nu), finite("kappa", kappa)
         self.epsilon = finite("epsilon", epsilon)
@@ -422,10 +468,12 @@ class FitzHughNagumo(_Stepper):
         self.c, self.w = self._device_array(c0), self._device_array(w0)
         self._previous, self._increment, self._earlier = wp.clone(self.c), wp.zeros_like(self.c), wp.zeros_like(self.c)
         self._streak = wp.zeros(len(c0), dtype=wp.int32, device=self.device)
+        self._produced = wp.zeros_like(self.c)  # per vertex, the amount the reaction added (see `produced`)
+        self.produced_offset = 0.0  # the amount before this stepper's steps (set_produced)
         if self.implicit:
             if tol is None:
                 tol = 1e-5 if self.scalar == wp.float32 else 1e-10
-            self._solver = _ShiftedMassSolver(operator, positive("tol", tol), count("max_cg_iterations", max_cg_iterations, 1))
+            self._solver = ShiftedMassSolver(operator, positive("tol", tol), count("max_cg_iterations", max_cg_iterations, 1))
             self._rhs = wp.empty_like(self.c)
         self._refresh()
 
@@ -442,16 +490,17 @@ class FitzHughNagumo(_Stepper):
         s = self.scalar
         if self.implicit:
             wp.launch(fhn_imex_rhs_kernel, dim=len(self.c),
-                      inputs=[self.c, self.w, self.operator.mass_device, s(self.nu), s(self.dt)], outputs=[self._rhs],
-                      device=self.device)  # fmt: skip
+                      inputs=[self.c, self.w, self.operator.mass_device, s(self.nu), s(self.dt)],
+                      outputs=[self._rhs, self._produced], device=self.device)  # fmt: skip
             self._solver.solve(self._rhs, self.c)
             wp.launch(fhn_inhibitor_kernel, dim=len(self.c), inputs=[self.c, s(self.epsilon), s(self.kappa), s(self.dt)],
                       outputs=[self.w], device=self.device)  # fmt: skip
         else:
             self._diffusion_acceleration(self.c)
             wp.launch(fhn_explicit_kernel, dim=len(self.c),
-                      inputs=[self._acceleration, s(self.gamma**2), s(self.nu), s(self.kappa), s(self.epsilon), s(self.dt)],
-                      outputs=[self.c, self.w], device=self.device)  # fmt: skip
+                      inputs=[self._acceleration, self.operator.mass_device, s(self.gamma**2), s(self.nu), s(self.kappa),
+                              s(self.epsilon), s(self.dt)],
+                      outputs=[self.c, self.w, self._produced], device=self.device)  # fmt: skip
         wp.launch(flip_kernel, dim=len(self.c), inputs=[self.c, s(self.flip_floor), s(FLIP_HOLD), FLIP_STEPS],
                   outputs=[self._previous, self._increment, self._earlier, self._streak, self._flag],
                   device=self.device)  # fmt: skip
@@ -470,149 +519,25 @@ class FitzHughNagumo(_Stepper):
         return None
 
     def _state(self) -> list:
-        return [self.c, self.w, self._previous, self._increment, self._earlier, self._streak]
+        return [self.c, self.w, self._previous, self._increment, self._earlier, self._streak, self._produced]
 
     def _watched(self) -> list:
         return [self.c, self.w]
 
+    def _transported(self) -> list:
+        return [self.c, self.w, self._previous]  # previous: c^n for the flip detector's increment
+
+    def produced(self) -> float:
+        """∫₀ᵗ ∫ r(c, w) dω dt: the amount the reaction r = f(c) - w has added since t = 0, summed exactly as
+        the steps add it (diffusion adds none), plus `produced_offset` (a resumed run's amount so far).
+        With conservative transport C(t) = C(0) + produced() to round-off (IMEX: to the CG tolerance)."""
+        return self.produced_offset + float(np.sum(self._produced.numpy().astype(np.float64)))
+
+    def set_produced(self, amount: float) -> None:
+        """Start `produced()` from `amount` (a run resumed at a frame that stored it)."""
+        self._produced.zero_()
+        self.produced_offset = finite("amount", amount)
+
     def inhibitor(self) -> np.ndarray:
         """(V,) the inhibitor w (control values)."""
         return self.w.numpy().astype(np.float64)
-
-
-class _ShiftedMassSolver:
-    """(M + s K) x = b on the device: Jacobi-preconditioned conjugate gradients.
-
-    The loop runs under `wp.capture_while` (device-side exit inside captured graphs) and stops
-    when r·P r ≤ tol² b·P b or after `max_iterations`; a miss sets `failed`. Plain kernels with
-    strided reductions: Warp's tiled CG reductions cost ~5 ms per dot product on the CPU
-    (Warp 1.19, measured), several stiffness actions.
-    """
-
-    def __init__(self, operator: LaplaceBeltrami, tol: float, max_iterations: int):
-        self.operator, self.tol, self.max_iterations = operator, tol, max_iterations
-        n, scalar = operator.n_vertices, operator.scalar
-        with wp.ScopedDevice(operator.device):
-            self.r, self.z, self.p, self.Ap, self.Kp = (wp.empty(n, dtype=scalar) for _ in range(5))
-            self.K_diagonal, self.inverse_diagonal = wp.empty(n, dtype=scalar), wp.empty(n, dtype=scalar)
-            self.sums = wp.zeros(5, dtype=scalar)  # r·z, new r·z, p·Ap, b·P b, stop threshold
-            self.iteration, self.condition = wp.zeros(1, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
-            self.failed = wp.zeros(1, dtype=wp.int32)
-        self.rz, self.rz_new, self.pAp, self.bz, self.rz_stop = (self.sums[i : i + 1] for i in range(5))
-        self.shift = None
-        self._x = None
-
-    def prepare(self, shift: float) -> None:
-        """Set s and the Jacobi preconditioner 1 / (M + s diag K) for the current surface."""
-        op = self.operator
-        self.shift = op.scalar(shift)
-        op.diagonal_device(self.K_diagonal)
-        wp.launch(inverse_diagonal_kernel, dim=op.n_vertices, inputs=[op.mass_device, self.K_diagonal, self.shift],
-                  outputs=[self.inverse_diagonal], device=op.device)  # fmt: skip
-
-    def _apply(self, x: wp.array, out: wp.array) -> None:
-        op = self.operator
-        op.apply_device(x, self.Kp)
-        wp.launch(shifted_operator_kernel, dim=op.n_vertices, inputs=[x, self.Kp, op.mass_device, self.shift],
-                  outputs=[out], device=op.device)  # fmt: skip
-
-    def solve(self, b: wp.array, x: wp.array) -> None:
-        """x ← (M + s K)⁻¹ b, starting from x."""
-        op, n = self.operator, self.operator.n_vertices
-        self._x = x
-        self._apply(x, self.Ap)
-        wp.launch(cg_start_kernel, dim=n, inputs=[b, self.Ap, self.inverse_diagonal], outputs=[self.r, self.z, self.p],
-                  device=op.device)  # fmt: skip
-        op.dot_device(self.r, self.z, self.rz)
-        self.bz.zero_()
-        stride = min(n, DOT_STRIDE)
-        wp.launch(weighted_dot_kernel, dim=stride, inputs=[b, b, self.inverse_diagonal, stride], outputs=[self.bz],
-                  device=op.device)  # fmt: skip
-        wp.launch(cg_stop_kernel, dim=1, inputs=[self.rz, self.bz, op.scalar(self.tol**2)],
-                  outputs=[self.rz_stop, self.iteration, self.condition], device=op.device)  # fmt: skip
-        wp.capture_while(self.condition, self._iterate)
-        wp.launch(cg_failed_kernel, dim=1, inputs=[self.rz, self.rz_stop], outputs=[self.failed], device=op.device)
-
-    def _iterate(self) -> None:
-        op, n = self.operator, self.operator.n_vertices
-        self._apply(self.p, self.Ap)
-        op.dot_device(self.p, self.Ap, self.pAp)
-        wp.launch(cg_step_kernel, dim=n, inputs=[self.p, self.Ap, self.inverse_diagonal, self.rz, self.pAp],
-                  outputs=[self._x, self.r, self.z], device=op.device)  # fmt: skip
-        op.dot_device(self.r, self.z, self.rz_new)
-        wp.launch(cg_direction_kernel, dim=n, inputs=[self.z, self.rz, self.rz_new], outputs=[self.p], device=op.device)
-        wp.launch(cg_condition_kernel, dim=1, inputs=[self.rz_new, self.rz, self.rz_stop, self.iteration, self.max_iterations],
-                  outputs=[self.condition], device=op.device)  # fmt: skip
-
-
-# ---------------------------------------------------------------- initial conditions (SPEC §5)
-
-
-def _origin_point(operator: LaplaceBeltrami, origin) -> np.ndarray:
-    if isinstance(origin, (int, np.integer)) and not isinstance(origin, bool):
-        if not 0 <= origin < operator.n_vertices:
-            raise ValueError(f"origin vertex must lie in [0, {operator.n_vertices}), got {origin}")
-        return operator.points()[int(origin)]
-    point = np.asarray(origin, dtype=np.float64)
-    if point.shape != (3,) or not np.all(np.isfinite(point)):
-        raise ValueError(f"origin must be a vertex index or a finite point (3,), got {origin!r}")
-    return point
-
-
-def nodal_normals(operator: LaplaceBeltrami) -> np.ndarray:
-    """(V, 3) unit normals at `points()`: area-weighted normals of the polyhedron they span."""
-    p, tri = operator.points(), operator.mesh.triangles
-    face = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
-    normal = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(normal, tri[:, k], face)
-    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
-
-
-def gaussian_pulse(operator: LaplaceBeltrami, origin, sigma, *, gamma, amplitude=1.0, radius=None, distance="chord"):
-    """Outgoing Gaussian pulse (SPEC §5): control values (c0, v0) of
-
-        c = C0 exp(-(s/R)² / (2σ²)),   c_t = -γ ∂c/∂s = γ C0 s / (R² σ²) exp(-(s/R)² / (2σ²)) ≥ 0
-
-    so the total concentration rises. s is the distance from `origin` (a vertex index or a
-    point): distance="chord" the straight-line distance (adequate for a narrow pulse),
-    "arc" the great-circle distance 2R asin(chord / 2R) on a sphere of radius R. R is `radius`
-    (default: the radius of the sphere with the surface's area); σ is dimensionless (the
-    paper's oocytes: σ² = 2/R² in its units). Values at `points()`, interpolated.
-    """
-    sigma, gamma, amplitude = positive("sigma", sigma), positive("gamma", gamma), finite("amplitude", amplitude)
-    if distance not in ("chord", "arc"):
-        raise ValueError(f"distance must be 'chord' or 'arc', got {distance!r}")
-    R = math.sqrt(operator.area / (4 * math.pi)) if radius is None else positive("radius", radius)
-    chord = np.linalg.norm(operator.points() - _origin_point(operator, origin), axis=1)
-    s = chord if distance == "chord" else 2 * R * np.arcsin(np.minimum(1.0, chord / (2 * R)))
-    c = amplitude * np.exp(-((s / R) ** 2) / (2 * sigma**2))
-    v = gamma * s / (R**2 * sigma**2) * c
-    return operator.control_values(c), operator.control_values(v)
-
-
-def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=None):
-    """The buckling-mode runs' steady front (SPEC §5, supplement Fig. S1b): control values (c0, v0).
-
-        c = [1 + e^{-δk}] / [1 + e^{k(|z| - δ)}]        (c = 1 at the origin, the front at |z| = δ)
-        c_t = -γ (dc/d|z|) |∇_Γ |z||,  |∇_Γ z| = sqrt(1 - (n·ê)²)      (outgoing at speed γ)
-
-    z = (p - x)·ê is the height below the origin p along `axis` ê (default: the outward normal
-    at the origin, so z ≥ 0 on a sphere); k (1/length) sets the front's steepness, δ (length)
-    its height. n are `nodal_normals`. Values at `points()`, interpolated.
-    """
-    k, delta, gamma = positive("k", k), positive("delta", delta), positive("gamma", gamma)
-    p = _origin_point(operator, origin)
-    normals = nodal_normals(operator)
-    if axis is None:
-        axis = normals[np.argmin(np.linalg.norm(operator.points() - p, axis=1))]
-    axis = np.asarray(axis, dtype=np.float64)
-    if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) == 0:
-        raise ValueError(f"axis must be a finite non-zero vector (3,), got {axis!r}")
-    axis = axis / np.linalg.norm(axis)
-    height = np.abs((p - operator.points()) @ axis)
-    e = np.exp(np.minimum(k * (height - delta), 700.0))
-    c = (1 + math.exp(-delta * k)) / (1 + e)
-    dc_dheight = -(1 + math.exp(-delta * k)) * k * e / (1 + e) ** 2
-    slope = np.sqrt(np.maximum(0.0, 1 - (normals @ axis) ** 2))
-    return operator.control_values(c), operator.control_values(-gamma * dc_dheight * slope)
