@@ -68,7 +68,8 @@ from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import cube, icosphere, prism
 from wavewarp.quadrature import triangle_rule
 from wavewarp.scene import ArrivalTimes, load_scene, mean_edge, resolve
-from wavewarp.shell import RelaxationError, Shell
+from wavewarp.relax import RelaxationError
+from wavewarp.shell import Shell
 from wavewarp.walker import nearest_vertex
 from wavewarp.initial import gaussian_pulse
 from wavewarp.waves import FitzHughNagumo, Telegraph

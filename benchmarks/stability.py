@@ -68,7 +68,8 @@ from wavewarp.dynamics import ShellDynamics
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
-from wavewarp.shell import RelaxationError, Shell
+from wavewarp.relax import RelaxationError
+from wavewarp.shell import Shell
 from wavewarp.initial import gaussian_pulse
 from wavewarp.waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph
 

@@ -11,7 +11,7 @@ import pytest
 
 from wavewarp.benchmarks.accuracy import FAMILIES, closed_form_stretch, front_reference, telegraph_modes
 from wavewarp.cli import main as cli
-from wavewarp.cli import scene_descriptions
+from wavewarp.scene import scene_descriptions
 
 CONFIGURATIONS = {"spectrum": {"sphere"}, "telegraph": {"modes", "pulse", "wide pulse"}, "radius": set(FAMILIES),
                   "arrival": {"sphere", "cube"}, "front": {"sphere"}}  # fmt: skip

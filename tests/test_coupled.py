@@ -9,7 +9,8 @@ from wavewarp.coupled import QuasiStatic
 from wavewarp.geometry import limit_positions
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
-from wavewarp.shell import RelaxationError, Shell
+from wavewarp.relax import RelaxationError
+from wavewarp.shell import Shell
 from wavewarp.waves import Telegraph
 
 F64 = dict(device="cpu", dtype="float64")

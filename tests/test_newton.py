@@ -12,7 +12,8 @@ from wavewarp.modes import softest_modes
 from wavewarp.newton import NewtonFinish, ShiftedInverse, distance_two_colouring, patch_pairs, rigid_modes
 from wavewarp.relax import ROUND_OFF_SLACK
 from wavewarp.self_contact import SelfContact
-from wavewarp.shell import RelaxationError, Shell
+from wavewarp.relax import RelaxationError
+from wavewarp.shell import Shell
 from wavewarp.waves import Telegraph
 
 F64 = dict(dtype="float64")

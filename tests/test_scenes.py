@@ -9,7 +9,8 @@ import h5py
 import numpy as np
 import pytest
 
-from wavewarp.cli import main, scene_descriptions
+from wavewarp.cli import main
+from wavewarp.scene import scene_descriptions
 from wavewarp.geometry import limit_positions
 from wavewarp.mesh import Mesh, icosphere, prism, save
 from wavewarp.scene import face_heights, load_scene, resolve

@@ -9,7 +9,8 @@ from test_subdivision import rotated_corners
 
 from wavewarp.geometry import limit_positions
 from wavewarp.mesh import cube, icosphere, prism
-from wavewarp.shell import RelaxationError, Shell
+from wavewarp.relax import RelaxationError
+from wavewarp.shell import Shell
 
 F64 = dict(dtype="float64")
 ACTIVE = dict(AC=0.4, AI=0.7, volume_penalty=3.0)

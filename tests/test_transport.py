@@ -21,7 +21,8 @@ from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.scene import load_scene, resolve, resumed
 from wavewarp.shell import Shell
-from wavewarp.waves import FitzHughNagumo, Telegraph, telegraph_total
+from wavewarp.chemistry import telegraph_total
+from wavewarp.waves import FitzHughNagumo, Telegraph
 
 F64 = dict(device="cpu", dtype="float64")
 

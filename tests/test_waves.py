@@ -17,16 +17,8 @@ from scipy.optimize import minimize_scalar
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import cube, icosphere
 from wavewarp.kernels.waves import FLIP_FLOP, flip_kernel
-from wavewarp.waves import (
-    FLIP_FLOOR,
-    FLIP_HOLD,
-    FLIP_STEPS,
-    BlowUpError,
-    FitzHughNagumo,
-    OscillationError,
-    Telegraph,
-    TimeStepError,
-)
+from wavewarp.chemistry import FLIP_FLOOR, FLIP_HOLD, FLIP_STEPS
+from wavewarp.waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, TimeStepError
 from wavewarp.initial import gaussian_pulse, steady_front
 
 F64 = dict(device="cpu", dtype="float64")

@@ -1,11 +1,6 @@
 """wavewarp: chemical waves on active elastic shells (Loop-subdivision Koiter shells in Warp)."""
 
-import os as _os
 from importlib.metadata import PackageNotFoundError, version
-from importlib.util import find_spec as _find_spec
-
-if _find_spec("wavewarp.kernels") is None:  # imported from a source tree: kernels/ sits beside us
-    __path__.append(_os.path.dirname(_os.path.dirname(_os.path.abspath(__file__))))
 
 try:
     __version__ = version("wavewarp")
@@ -18,7 +13,8 @@ from .laplace import LaplaceBeltrami  # noqa: E402
 from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
 from .modes import azimuthal_order, softest_modes  # noqa: E402
 from .self_contact import SelfContact  # noqa: E402
-from .shell import RelaxationError, Shell  # noqa: E402
+from .relax import RelaxationError  # noqa: E402
+from .shell import Shell  # noqa: E402
 from .initial import gaussian_pulse, steady_front  # noqa: E402
 from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph  # noqa: E402
 

@@ -7,7 +7,6 @@ import contextlib
 import importlib
 import json
 import os
-import pkgutil
 import signal
 import sys
 import time
@@ -15,21 +14,9 @@ import time
 import numpy as np
 
 
-def scene_descriptions() -> dict[str, str]:
-    """Scene name -> one-line description, from the modules of `wavewarp.scenes`."""
-    import wavewarp.scenes as scenes
-
-    found = {}
-    for info in pkgutil.iter_modules(scenes.__path__):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"wavewarp.scenes.{info.name}")
-        name = getattr(module, "NAME", info.name.replace("_", "-"))
-        found[name] = getattr(module, "DESCRIPTION", "")
-    return dict(sorted(found.items()))
-
-
 def _list(args) -> int:
+    from .scene import scene_descriptions
+
     scenes = scene_descriptions()
     if not scenes:
         print("no scenes installed yet; `wavewarp render` draws a limit surface to USD")
@@ -65,7 +52,7 @@ def _scene_run(args) -> int:
     from .io import check_writable
     from .mesh import load
     from .scene import load_scene, resolve, resumed
-    from .shell import RelaxationError
+    from .relax import RelaxationError
     from .trajectory import TrajectoryWriter, last_frame
     from .usd import UsdAnimation
     from .waves import BlowUpError, TimeStepError
@@ -309,7 +296,7 @@ def main(argv=None) -> int:
     bench.add_argument("options", nargs=argparse.REMAINDER, help="the benchmark's own options (wavewarp bench NAME -h)")
     bench.set_defaults(run=_bench)
     args = parser.parse_args(argv)
-    from .shell import RelaxationError
+    from .relax import RelaxationError
     from .waves import BlowUpError
 
     try:

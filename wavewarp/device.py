@@ -77,19 +77,15 @@ def block_sum(values: wp.array, total: wp.array) -> None:
                     outputs=[total], block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
 
 
-def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool, revision: int | None = None) -> None:
+def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool) -> None:
     """Call `step()` `steps` times on `device`; with `capture`, as one graph cached in `graphs` by
     step count (`modules`: every kernel module a step launches, loaded first). A graph keeps the
-    launch arguments it was captured with, so a new `revision` (the shell's, `Shell.revision`: V̄ or
-    its terms changed) drops the cached ones."""
+    launch arguments it was captured with: whoever changes them clears `graphs`."""
     with wp.ScopedDevice(device):
         if not capture:
             for _ in range(steps):
                 step()
             return
-        if graphs.get("revision", revision) != revision:
-            graphs.clear()
-        graphs["revision"] = revision
         graph = graphs.get(steps)
         if graph is None:
             for module in modules:

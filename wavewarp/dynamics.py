@@ -1,4 +1,4 @@
-"""Shell dynamics for the walkers (SPEC §3 "Walker scenes", §4; choice in docs/walkers.md).
+"""Shell dynamics for the walkers (docs/theory/walkers.md): solvers and ready-to-run steppers.
 
     M_I dv_I/dt = F_I(x) - M_I g ẑ + (Lᵀ f_ground)_I - η M_I (v_I - v_rigid),     dx_I/dt = v_I
 
@@ -17,8 +17,11 @@ differences) and ζ = (η + η_ground) / 2ω, η_ground = β max_J (Lᵀ1)_J / M
 per unit mass. The contact stiffness 2k|z| is small against the shell's at the scenes'
 penetrations; a runaway it causes is caught by the blow-up check.
 
-`OverdampedDynamics` is the mobility model of SPEC §3 (ζ M v = F, no inertia) on the same
-terms; measured against this one in docs/walkers.md ("Which mechanics").
+`OverdampedSolver` is the mobility model (ζ M v = F, no inertia) on the same terms.
+
+`InertialSolver` / `OverdampedSolver` advance a `State` (x, v) with `step(state_in, state_out, dt)`
+under the shell's current active reference; `ShellDynamics` / `OverdampedDynamics` hold a solver,
+its state, the time step and a guarded runner.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ import numpy as np
 import warp as wp
 
 from .checks import count, finite, positive
-from .device import reduction_threads, run_steps
+from .device import reduction_threads
 from .geometry import LimitMask, checked_positions, evaluate
 from .kernels import contact as kernels_contact
 from .kernels import dynamics as kernels_dynamics
@@ -57,15 +60,17 @@ from .kernels.dynamics import (
 from .kernels.limit_surface import limit_motion_kernel
 from .kernels.reduce import REDUCTION_BLOCK
 from .laplace import LaplaceBeltrami
+from .runner import GuardedRunner
 from .shell import Shell
+from .state import State
 from .waves import BlowUpError, TimeStepError
 
 
 @dataclass(frozen=True)
 class Ground:
-    """The ground z = 0 (SPEC §4): F_n = max(k z² - β v_z, 0) where z ≤ 0, F_f = -μ F_n tanh(k_f |v_t|) v̂_t.
+    """The ground z = 0: F_n = max(k z² - β v_z, 0) where z ≤ 0, F_f = -μ F_n tanh(k_f |v_t|) v̂_t.
 
-    contact "point" (SPEC §4): the law acts on each control vertex's limit point, k and β per point.
+    contact "point" (the paper's): the law acts on each control vertex's limit point, k and β per point.
     contact "area" (ours): the law is a pressure at the quadrature points of the limit surface,
     k and β per unit rest area, so the load pattern converges under refinement (docs/walkers.md).
     """
@@ -85,22 +90,17 @@ class Ground:
             raise ValueError(f"Ground.contact must be 'point' or 'area', got {self.contact!r}")
 
 
-class ShellDynamics:
-    """Inertial dynamics of `shell` (positions x, velocities v on its device and dtype).
+class InertialSolver:
+    """Symplectic Euler for the inertial shell (module docstring) on `shell`'s device and dtype.
 
-    density ρ (mass per reference area); c the control concentrations of the active reference
-    (default 0; a coupled stepper updates it with `shell.update_reference`); gravity g (along -z; 0 for none); ground a `Ground` or
-    None; damping η ≥ 0 (relative to the rigid-body motion); dt None picks `safety` × the stability
-    bound, a fixed dt past it raises TimeStepError (check_dt=False lets it run: stability studies);
-    omega, when known (the `omega_max` of an identical run), skips the Lanczos estimate of ω. Every `check_every` steps one flag is read:
-    NaN/Inf or a speed past `speed_limit` raises BlowUpError with the state restored.
+    density ρ (mass per reference area); gravity g (along -z; 0 for none); ground a `Ground` or None;
+    damping η ≥ 0 (relative to the rigid-body motion). A step acts on state.x, state.v under the shell's
+    current active reference (`shell.update_reference`), with no host round-trip.
     """
 
     scheme = "symplectic Euler shell dynamics"
 
-    def __init__(self, shell: Shell, *, density, gravity=0.0, ground: Ground | None = None, damping=0.0, x0=None,
-                 v0=None, c=None, dt=None, safety=0.9, check_dt=True, check_every=100, speed_limit=None,
-                 capture=True, omega=None):  # fmt: skip
+    def __init__(self, shell: Shell, *, density, gravity=0.0, ground: Ground | None = None, damping=0.0):
         if not isinstance(shell, Shell):
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         if ground is not None and not isinstance(ground, Ground):
@@ -115,11 +115,6 @@ class ShellDynamics:
         self.damping = finite("damping", damping)
         if self.gravity < 0 or self.damping < 0:
             raise ValueError(f"gravity and damping must be >= 0, got gravity={gravity!r}, damping={damping!r}")
-        self.safety = positive("safety", safety)
-        if self.safety > 1:
-            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
-        self.check_every = count("check_every", check_every, 1)
-        self.capture = bool(capture) and wp.get_device(self.device).is_cuda
         mesh = shell.mesh
         n = mesh.n_vertices
         self._reduction_threads = reduction_threads(n)
@@ -127,11 +122,7 @@ class ShellDynamics:
         self.mass = self.density * rest.mass()  # ρ ∫ N_I dω̄⁰ on the rest surface
         self.total_mass = float(self.mass.sum())
         self.mask = LimitMask.of(mesh, device=self.device, dtype=self.scalar.__name__)
-        x0 = mesh.vertices if x0 is None else checked_positions(x0, n, "x0")
-        v0 = np.zeros((n, 3)) if v0 is None else checked_positions(v0, n, "v0")
         with wp.ScopedDevice(self.device):
-            self.x = wp.array(x0.astype(self._real), dtype=self.vec3)
-            self.v = wp.array(v0.astype(self._real), dtype=self.vec3)
             self._mass = wp.array(self.mass.astype(self._real), dtype=self.scalar)
             self._inverse_mass = wp.array((1.0 / self.mass).astype(self._real), dtype=self.scalar)
             self._forces = wp.zeros(n, dtype=self.vec3)
@@ -147,16 +138,16 @@ class ShellDynamics:
             self._normal_force = wp.zeros(points, dtype=self.scalar)
             if points != n:
                 self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"]  # dω̄⁰ at each point
-            self._flag = wp.zeros(1, dtype=wp.int32)
-            self._backups = [wp.empty_like(self.x), wp.empty_like(self.v)]
-        c = np.zeros(n) if c is None else shell.checked_concentrations(c)
-        shell.update_reference(wp.array(c.astype(self._real), dtype=self.scalar, device=self.device))
-        self.time, self.steps = 0.0, 0
-        self._graphs, self.dt = {}, None
+            self.flag = wp.zeros(1, dtype=wp.int32)
         self.contact_damping = self._contact_damping()
-        self.set_time_step(dt, self.largest_frequency() if omega is None else omega, check_dt)
-        typical = self.gravity * 1e3 * self.dt * self.check_every + float(np.abs(v0).max()) + 1.0
-        self.speed_limit = positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
+
+    def state(self, x0=None, v0=None) -> State:
+        """x0 (default: the mesh's own positions) and v0 (default 0), checked, on the device."""
+        n = self.shell.mesh.n_vertices
+        x0 = self.shell.mesh.vertices if x0 is None else checked_positions(x0, n, "x0")
+        v0 = np.zeros((n, 3)) if v0 is None else checked_positions(v0, n, "v0")
+        with wp.ScopedDevice(self.device):
+            return State(x=wp.array(x0.astype(self._real), dtype=self.vec3), v=wp.array(v0.astype(self._real), dtype=self.vec3))
 
     # ---------------------------------------------------------------- stability bound
     def _contact_damping(self) -> float:
@@ -174,42 +165,24 @@ class ShellDynamics:
     def _zeta(self, omega: float) -> float:
         return (self.damping + self.contact_damping) / (2 * omega)
 
-    def _bound(self, omega: float) -> float:
+    def bound(self, omega: float) -> float:
+        """The stability bound on dt for the largest frequency ω."""
         zeta = self._zeta(omega)
         return 2.0 / omega * (math.sqrt(1 + zeta**2) - zeta)
 
-    def _bound_formula(self) -> str:
-        return f"dt < 2/ω (√(1+ζ²) - ζ), ζ = {self._zeta(self.omega_max):.3g}"
+    def bound_formula(self, omega: float) -> str:
+        return f"dt < 2/ω (√(1+ζ²) - ζ), ζ = {self._zeta(omega):.3g}"
 
-    def set_time_step(self, dt, omega: float, check_dt: bool = True) -> None:
-        """Take ω as the largest frequency (e.g. the largest over the active references a coupled
-        run will visit), derive the bound, and set dt: None = `safety` × the bound; a fixed dt past
-        the bound raises TimeStepError unless `check_dt` is false."""
-        self.omega_max = positive("omega", omega)
-        self.stable_dt = self._bound(self.omega_max)
-        if dt is None:
-            dt = self.safety * self.stable_dt
-        elif positive("dt", dt) > self.stable_dt and check_dt:
-            raise TimeStepError(
-                f"dt = {dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
-                f"({self._bound_formula()}, ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos): use dt <= "
-                f"{self.stable_dt:.6g}, e.g. "
-                f"dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), or dt=None"
-            )  # fmt: skip
-        if dt != self.dt:
-            self.dt = float(dt)
-            self._graphs.clear()
-
-    def largest_frequency(self, tol: float = 1e-6) -> float:
-        """ω = √λ_max(M⁻¹H) at the current positions and reference: Lanczos (ARPACK) on
+    def largest_frequency(self, x: wp.array, tol: float = 1e-6) -> float:
+        """ω = √λ_max(M⁻¹H) at positions x and the current reference: Lanczos (ARPACK) on
         M^-½ H M^-½, with H q from central differences of the shell's forces."""
         from scipy.sparse.linalg import LinearOperator, eigsh
 
         n = len(self.mass)
         step = (1e-3 if self.scalar == wp.float32 else 1e-6) * self.shell.edge_length
-        x = self.x.numpy().astype(np.float64)
+        x = x.numpy().astype(np.float64)
         scale = np.repeat(1.0 / np.sqrt(self.mass), 3)
-        probe, forces = wp.empty_like(self.x), wp.empty_like(self.x)
+        probe, forces = wp.empty(n, dtype=self.vec3, device=self.device), wp.empty(n, dtype=self.vec3, device=self.device)
 
         def matvec(q):
             q = scale * np.ravel(q)
@@ -227,7 +200,7 @@ class ShellDynamics:
         return math.sqrt(max(float(eigenvalue), 1e-300))
 
     # ---------------------------------------------------------------- stepping
-    def _contact_forces(self) -> None:
+    def _contact_forces(self, x: wp.array, v: wp.array) -> None:
         """Contact and friction on the limit points, reaching the control points through Lᵀ (or, for the
         area contact, as pressures on the quadrature points, spread back with the basis)."""
         if self.ground is None:
@@ -235,10 +208,10 @@ class ShellDynamics:
         m, n, s, g, t = self.mask, len(self._limit_x), self.scalar, self.ground, self.shell.tables
         patch = [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
         if g.contact == "point":
-            wp.launch(limit_motion_kernel, dim=n, inputs=[self.x, self.v, m.ring_start, m.ring, m.centre_weight,
-                                                          m.ring_weight], outputs=[self._limit_x, self._limit_v])  # fmt: skip
+            wp.launch(limit_motion_kernel, dim=n, inputs=[x, v, m.ring_start, m.ring, m.centre_weight, m.ring_weight],
+                      outputs=[self._limit_x, self._limit_v])  # fmt: skip
         else:
-            wp.launch(quadrature_motion_kernel, dim=n, inputs=[self.x, self.v, *patch], outputs=[self._limit_x, self._limit_v])
+            wp.launch(quadrature_motion_kernel, dim=n, inputs=[x, v, *patch], outputs=[self._limit_x, self._limit_v])
         wp.launch(ground_contact_kernel, dim=n, inputs=[self._limit_x, self._limit_v, s(g.stiffness), s(g.damping)],
                   outputs=[self._normal_force, self._limit_forces])  # fmt: skip
         if g.friction > 0:
@@ -251,114 +224,65 @@ class ShellDynamics:
             wp.launch(quadrature_spread_kernel, dim=n, inputs=[self._limit_forces, self._rest_area, *patch],
                       outputs=[self._forces])  # fmt: skip
 
-    def _step(self) -> None:
+    def step(self, state_in: State, state_out: State, dt: float) -> None:
         """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration)."""
-        s = self.scalar
-        self.shell.forces_device(self.x, self._forces)
-        wp.launch(rigid_sums_kernel, dim=self._reduction_threads,
-                  inputs=[self._forces, self._mass, self.x, self.v, int(self.damping > 0)],
-                  outputs=[self._rigid_sums, self._second_moment], block_dim=REDUCTION_BLOCK)  # fmt: skip
-        wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment, s(1.0 / self.total_mass)],
-                  outputs=[self._rigid])  # fmt: skip
-        self._contact_forces()
-        self._integrate()
+        if state_out is not state_in:
+            wp.copy(state_out.x, state_in.x)
+            wp.copy(state_out.v, state_in.v)
+        x, v, s = state_out.x, state_out.v, self.scalar
+        with wp.ScopedDevice(self.device):
+            self.shell.forces_device(x, self._forces)
+            wp.launch(rigid_sums_kernel, dim=self._reduction_threads, inputs=[self._forces, self._mass, x, v, int(self.damping > 0)],
+                      outputs=[self._rigid_sums, self._second_moment], block_dim=REDUCTION_BLOCK)  # fmt: skip
+            wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment, s(1.0 / self.total_mass)],
+                      outputs=[self._rigid])  # fmt: skip
+            self._contact_forces(x, v)
+            self._integrate(x, v, dt)
 
-    def _integrate(self) -> None:
+    def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
         s = self.scalar
         wp.launch(symplectic_euler_kernel, dim=len(self.mass),
-                  inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.gravity), s(self.dt)],
-                  outputs=[self.x, self.v])  # fmt: skip
+                  inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.gravity), s(dt)],
+                  outputs=[x, v])  # fmt: skip
 
-    def _run(self, steps: int) -> None:
-        run_steps(self._step, steps, device=self.device, graphs=self._graphs,
-                  modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface, kernels_reduce),
-                  capture=self.capture, revision=self.shell.revision)  # fmt: skip
+    def launch_checks(self, state: State, limit: float) -> None:
+        """flag = 1 where some |v_I| passed `limit` or is NaN/Inf (read by the caller)."""
+        self.flag.zero_()
+        wp.launch(speed_runaway_kernel, dim=len(self.mass), inputs=[state.v, self.scalar(limit)], outputs=[self.flag],
+                  device=self.device)  # fmt: skip
 
-    def advance(self, steps: int = 1):
-        """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""
-        steps = count("steps", steps, 0)
-        done = 0
-        while done < steps:
-            chunk = min(self.check_every, steps - done)
-            for backup, a in zip(self._backups, (self.x, self.v)):
-                wp.copy(backup, a)
-            self._run(chunk)
-            failure = self.runaway(self.time, chunk * self.dt)
-            if failure is not None:
-                for backup, a in zip(self._backups, (self.x, self.v)):
-                    wp.copy(a, backup)
-                raise failure
-            done += chunk
-            self.steps += chunk
-            self.time += chunk * self.dt
-        return self
-
-    def runaway(self, time: float, duration: float) -> BlowUpError | None:
-        """Read one flag: a BlowUpError (not raised) if some |v_I| passed `speed_limit` or is NaN/Inf,
-        for the steps from `time` over `duration`; None when all is well."""
-        self._flag.zero_()
-        wp.launch(speed_runaway_kernel, dim=len(self.mass), inputs=[self.v, self.scalar(self.speed_limit)],
-                  outputs=[self._flag], device=self.device)  # fmt: skip
-        if not self._flag.numpy()[0]:
-            return None
-        return BlowUpError(
-            f"{self.scheme} blew up between t = {time:.6g} and t = {time + duration:.6g} (NaN/Inf or a speed past "
-            f"{self.speed_limit:.3g}) with dt = {self.dt:.6g} (stability bound {self.stable_dt:.6g}); the state is "
-            f"restored to t = {time:.6g}. Reduce dt", time, self.steps,
-        )  # fmt: skip
-
-    def run_until(self, time: float):
-        """Advance by whole steps to the first step at or after `time`; returns self."""
-        return self.advance(max(0, math.ceil((finite("time", time) - self.time) / self.dt - 1e-9)))
-
-    # ---------------------------------------------------------------- state (NumPy)
-    def positions(self) -> np.ndarray:
-        return self.x.numpy().astype(np.float64)
-
-    def velocities(self) -> np.ndarray:
-        return self.v.numpy().astype(np.float64)
-
-    def launch_trace_row(self, c: wp.array, origin: int, row: wp.array, trace: wp.array) -> None:
+    # ---------------------------------------------------------------- measurements
+    def launch_trace_row(self, state: State, c: wp.array, origin: int, row: wp.array, trace: wp.array) -> None:
         """Device only (capturable): trace[row] = [c_origin, centre of mass, x_origin], row += 1."""
         self._first_moment.zero_()
-        wp.launch(first_moment_kernel, dim=self._reduction_threads, inputs=[self._mass, self.x],
+        wp.launch(first_moment_kernel, dim=self._reduction_threads, inputs=[self._mass, state.x],
                   outputs=[self._first_moment], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
-        wp.launch(trace_row_kernel, dim=1, inputs=[c, self.x, int(origin), self._first_moment,
+        wp.launch(trace_row_kernel, dim=1, inputs=[c, state.x, int(origin), self._first_moment,
                                                    self.scalar(1.0 / self.total_mass)],
                   outputs=[row, trace], device=self.device)  # fmt: skip
 
-    def center_of_mass(self) -> np.ndarray:
-        """Σ M_I x_I / Σ M_I: exactly the centre of mass of the density ρ on the surface."""
-        return self.mass @ self.positions() / self.total_mass
-
-    def momentum(self) -> np.ndarray:
-        return self.mass @ self.velocities()
-
-    def kinetic_energy(self) -> float:
-        return 0.5 * float(self.mass @ np.sum(self.velocities() ** 2, axis=1))
-
-    def external_forces(self) -> np.ndarray:
-        """(V, 3) gravity, contact and friction forces on the control points at the current state."""
+    def external_forces(self, state: State) -> np.ndarray:
+        """(V, 3) gravity, contact and friction forces on the control points at `state`."""
         with wp.ScopedDevice(self.device):
             self._forces.zero_()
             if self.gravity > 0:
                 wp.launch(gravity_kernel, dim=len(self.mass), inputs=[self._mass, self.scalar(self.gravity)],
                           outputs=[self._forces])  # fmt: skip
-            self._contact_forces()
+            self._contact_forces(state.x, state.v)
         return self._forces.numpy().astype(np.float64)
 
-    def normal_forces(self) -> np.ndarray:
-        """Ground normal force on each of the ground's points at the current state: (V,) on the limit
-        points, or (Q,) on the quadrature points for the area contact (pressure × dω̄⁰)."""
+    def normal_forces(self, state: State) -> np.ndarray:
+        """Ground normal force on each of the ground's points at `state`: (V,) on the limit points, or (Q,)
+        on the quadrature points for the area contact (pressure × dω̄⁰)."""
         if self.ground is None:
             return np.zeros(len(self.mass))
-        self.external_forces()
+        self.external_forces(state)
         force = self._normal_force.numpy().astype(np.float64)
         return force if self.ground.contact == "point" else force * self._rest_area.numpy()
 
 
-class OverdampedDynamics(ShellDynamics):
-    """The overdamped mobility model (SPEC §3's alternative; the paper's "overdamped dynamics"):
+class OverdampedSolver(InertialSolver):
+    """The overdamped mobility model (the paper's "overdamped dynamics"):
 
         ζ M_I v_I = F_I(x) - M_I g ẑ + (Lᵀ f_ground(L x, L v⁻))_I,     x ← x + dt v
 
@@ -366,13 +290,12 @@ class OverdampedDynamics(ShellDynamics):
     velocity its net force gives it. The ground's damping and friction need a velocity; they see the
     last step's v⁻ = (x_n - x_(n-1))/dt (explicit, lagged). Summing over the points, the internal
     forces drop out: the centre of mass moves at (net external force)/(ζ ΣM) exactly, so on the
-    ground only friction can move it, at most μ g/ζ (docs/walkers.md, "Which mechanics").
+    ground only friction can move it, at most μ g/ζ.
 
-    Stability: explicit Euler on the gradient flow needs dt < 2ζ/ω² (ω² = λ_max(M⁻¹H), as for
-    `ShellDynamics`); the lagged contact damping feeds back with gain η_ground/ζ (η_ground, the
-    contact damping per unit mass of `_contact_damping`), so ζ must exceed η_ground (ValueError otherwise). drag=None picks 2 η_ground
-    (gain ½), the least drag that keeps the lag well damped (no ground: give ζ). Other arguments as
-    `ShellDynamics` (no `damping`: the drag damps every motion).
+    Stability: explicit Euler on the gradient flow needs dt < 2ζ/ω² (ω² = λ_max(M⁻¹H)); the lagged
+    contact damping feeds back with gain η_ground/ζ, so ζ must exceed η_ground (ValueError otherwise).
+    drag=None picks 2 η_ground (gain ½), the least drag that keeps the lag well damped (no ground: give
+    ζ). No background damping: the drag damps every motion.
     """
 
     scheme = "overdamped (mobility) shell dynamics"
@@ -397,14 +320,157 @@ class OverdampedDynamics(ShellDynamics):
             )  # fmt: skip
         return eta
 
-    def _bound(self, omega: float) -> float:
+    def bound(self, omega: float) -> float:
         return 2.0 * self.drag / omega**2
 
-    def _bound_formula(self) -> str:
+    def bound_formula(self, omega: float) -> str:
         return f"dt < 2ζ/ω², ζ = {self.drag:.6g}"
 
-    def _integrate(self) -> None:
+    def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
         s = self.scalar
         wp.launch(overdamped_euler_kernel, dim=len(self.mass),
-                  inputs=[self._forces, self._inverse_mass, self._rigid, s(1.0 / self.drag), s(self.gravity), s(self.dt)],
-                  outputs=[self.x, self.v])  # fmt: skip
+                  inputs=[self._forces, self._inverse_mass, self._rigid, s(1.0 / self.drag), s(self.gravity), s(dt)],
+                  outputs=[x, v])  # fmt: skip
+
+
+class ShellDynamics:
+    """Inertial dynamics of `shell`, ready to run: an `InertialSolver`, its state (x, v), the time step
+    and a guarded runner.
+
+    c the control concentrations of the active reference (default 0; a coupled stepper updates it with
+    `shell.update_reference`); dt None picks `safety` × the stability bound, a fixed dt past it raises
+    TimeStepError (check_dt=False lets it run: stability studies); omega, when known (the `omega_max`
+    of an identical run), skips the Lanczos estimate of ω. Every `check_every` steps one flag is read:
+    NaN/Inf or a speed past `speed_limit` raises BlowUpError with the state restored.
+    """
+
+    solver_type = InertialSolver
+
+    def __init__(self, shell: Shell, *, density, gravity=0.0, ground: Ground | None = None, x0=None, v0=None, c=None,
+                 dt=None, safety=0.9, check_dt=True, check_every=100, speed_limit=None, capture=True, omega=None,
+                 **solver_options):  # fmt: skip
+        self.solver = self.solver_type(shell, density=density, gravity=gravity, ground=ground, **solver_options)
+        self.shell, self.ground, self.device, self.scalar = shell, ground, self.solver.device, self.solver.scalar
+        self.safety = positive("safety", safety)
+        if self.safety > 1:
+            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+        self.capture = bool(capture) and wp.get_device(self.device).is_cuda
+        self.state = self.solver.state(x0, v0)
+        c = np.zeros(shell.mesh.n_vertices) if c is None else shell.checked_concentrations(c)
+        shell.update_reference(wp.array(c.astype(shell._real), dtype=self.scalar, device=self.device))
+        self.dt = None
+        self.runner = GuardedRunner(self._step, protected=lambda: [self.state.x, self.state.v], check=self._check,
+                                    device=self.device, capture=self.capture, check_every=check_every,
+                                    modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface,
+                                             kernels_reduce))  # fmt: skip
+        shell.listen(self.notify_model_changed)
+        self.set_time_step(dt, self.largest_frequency() if omega is None else omega, check_dt)
+        v0 = self.state.numpy("v")
+        typical = self.solver.gravity * 1e3 * self.dt * self.runner.check_every + float(np.abs(v0).max()) + 1.0
+        self.speed_limit = positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
+
+    scheme = property(lambda self: self.solver.scheme)
+    x = property(lambda self: self.state.x)
+    v = property(lambda self: self.state.v)
+    mass = property(lambda self: self.solver.mass)
+    total_mass = property(lambda self: self.solver.total_mass)
+    density = property(lambda self: self.solver.density)
+    gravity = property(lambda self: self.solver.gravity)
+    damping = property(lambda self: self.solver.damping)
+    contact_damping = property(lambda self: self.solver.contact_damping)
+    check_every = property(lambda self: self.runner.check_every)
+    time = property(lambda self: self.state.time, lambda self, t: setattr(self.state, "time", float(t)))
+    steps = property(lambda self: self.state.steps, lambda self, n: setattr(self.state, "steps", int(n)))
+
+    def notify_model_changed(self) -> None:
+        """The shell's V̄ or terms changed: the captured steps are captured anew."""
+        self.runner.invalidate()
+
+    def set_time_step(self, dt, omega: float, check_dt: bool = True) -> None:
+        """Take ω as the largest frequency (e.g. the largest over the active references a coupled
+        run will visit), derive the bound, and set dt: None = `safety` × the bound; a fixed dt past
+        the bound raises TimeStepError unless `check_dt` is false."""
+        self.omega_max = positive("omega", omega)
+        self.stable_dt = self.solver.bound(self.omega_max)
+        if dt is None:
+            dt = self.safety * self.stable_dt
+        elif positive("dt", dt) > self.stable_dt and check_dt:
+            raise TimeStepError(
+                f"dt = {dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
+                f"({self.solver.bound_formula(self.omega_max)}, ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos): "
+                f"use dt <= {self.stable_dt:.6g}, e.g. dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), "
+                "or dt=None"
+            )  # fmt: skip
+        if dt != self.dt:
+            self.dt = float(dt)
+            self.runner.invalidate()
+
+    def largest_frequency(self, tol: float = 1e-6) -> float:
+        """ω = √λ_max(M⁻¹H) at the current positions and reference (`InertialSolver.largest_frequency`)."""
+        return self.solver.largest_frequency(self.state.x, tol)
+
+    def _step(self) -> None:
+        self.solver.step(self.state, self.state, self.dt)
+
+    def _check(self, chunk: int):
+        return self.runaway(self.time, chunk * self.dt)
+
+    def advance(self, steps: int = 1):
+        """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""
+
+        def done(chunk):
+            self.state.steps += chunk
+            self.state.time += chunk * self.dt
+
+        self.runner.run(steps, done)
+        return self
+
+    def runaway(self, time: float, duration: float) -> BlowUpError | None:
+        """Read one flag: a BlowUpError (not raised) if some |v_I| passed `speed_limit` or is NaN/Inf,
+        for the steps from `time` over `duration`; None when all is well."""
+        self.solver.launch_checks(self.state, self.speed_limit)
+        if not self.solver.flag.numpy()[0]:
+            return None
+        return BlowUpError(
+            f"{self.scheme} blew up between t = {time:.6g} and t = {time + duration:.6g} (NaN/Inf or a speed past "
+            f"{self.speed_limit:.3g}) with dt = {self.dt:.6g} (stability bound {self.stable_dt:.6g}); the state is "
+            f"restored to t = {time:.6g}. Reduce dt", time, self.steps,
+        )  # fmt: skip
+
+    def run_until(self, time: float):
+        """Advance by whole steps to the first step at or after `time`; returns self."""
+        return self.advance(max(0, math.ceil((finite("time", time) - self.time) / self.dt - 1e-9)))
+
+    # ---------------------------------------------------------------- state (NumPy)
+    def positions(self) -> np.ndarray:
+        return self.state.numpy("x")
+
+    def velocities(self) -> np.ndarray:
+        return self.state.numpy("v")
+
+    def center_of_mass(self) -> np.ndarray:
+        """Σ M_I x_I / Σ M_I: exactly the centre of mass of the density ρ on the surface."""
+        return self.mass @ self.positions() / self.total_mass
+
+    def momentum(self) -> np.ndarray:
+        return self.mass @ self.velocities()
+
+    def kinetic_energy(self) -> float:
+        return 0.5 * float(self.mass @ np.sum(self.velocities() ** 2, axis=1))
+
+    def external_forces(self) -> np.ndarray:
+        """(V, 3) gravity, contact and friction forces on the control points at the current state."""
+        return self.solver.external_forces(self.state)
+
+    def normal_forces(self) -> np.ndarray:
+        """Ground normal force on each of the ground's points at the current state (`InertialSolver.normal_forces`)."""
+        return self.solver.normal_forces(self.state)
+
+
+class OverdampedDynamics(ShellDynamics):
+    """The overdamped mobility model, ready to run (`OverdampedSolver`): drag ζ (None: 2 η_ground), no
+    background damping; other arguments as `ShellDynamics`."""
+
+    solver_type = OverdampedSolver
+
+    drag = property(lambda self: self.solver.drag)

@@ -29,7 +29,6 @@ import scipy.sparse.linalg as sparse_linalg
 import warp as wp
 
 from .kernels.newton import hessian_columns_kernel, perturb_kernel
-from .relax import ENERGY_NOISE
 
 # relative central-difference step: its round-off (1e-16 / STEP) and truncation (STEP²) errors are both ~1e-10
 DIFFERENCE_STEP = 1e-6
@@ -37,6 +36,8 @@ MAX_SHIFT_TRIES = 40  # LM shift increases before the step gives up (round-off f
 # a step first tries CG preconditioned by the last factorization; this many iterations to this
 # relative residual, or the Hessian is factored anew
 KRYLOV_ITERATIONS, KRYLOV_TOL = 25, 1e-4
+# relative round-off of the energy sum (float64 accumulation of float32 or float64 terms)
+ENERGY_NOISE = {wp.float32: 1e-7, wp.float64: 1e-12}
 
 
 def patch_pairs(host, n_vertices: int) -> sparse.csr_matrix:
@@ -68,17 +69,6 @@ def distance_two_colouring(pattern: sparse.csr_matrix) -> np.ndarray:
     return colour
 
 
-def float64_twin(shell):
-    """The same shell in float64 on the same device, with the same rest volume."""
-    from .shell import Shell
-
-    twin = Shell(shell.mesh, shell.thickness, shell.young, shell.poisson, shell.AC, shell.AI, shell.volume_penalty,
-                 shell.model, rule=shell.rule, deterministic=shell.deterministic, bilayer_radius=shell.bilayer_radius,
-                 device=shell.device, dtype="float64")  # fmt: skip
-    twin.rest_volume = shell.rest_volume
-    return twin
-
-
 def rigid_modes(x: np.ndarray) -> np.ndarray:
     """(6, 3V) orthonormal translations and rotations about the centroid of positions x."""
     r = x - x.mean(axis=0)
@@ -95,7 +85,7 @@ class NewtonFinish:
 
     def __init__(self, shell):
         self.shell = shell
-        self.work = shell if shell.scalar == wp.float64 else float64_twin(shell)
+        self.work = shell if shell.scalar == wp.float64 else shell.twin("float64")
         n = shell.mesh.n_vertices
         pattern = patch_pairs(self.work.tables.host, n)
         self.indptr, self.indices = pattern.indptr, pattern.indices

@@ -42,6 +42,7 @@ from .kernels.relax import (
     start_search_kernel,
     trial_kernel,
 )
+from .newton import ENERGY_NOISE, NewtonFinish
 
 METHODS = ("ncg", "newton", "auto")
 # a CG stop at the round-off floor within this factor of tol is the dtype's floor: Newton cannot help
@@ -49,8 +50,19 @@ ROUND_OFF_SLACK = 10.0
 # Newton steps a finish may take: every step lowers the energy, and a snap-through to a distant
 # equilibrium took 132–137 (docs/shell.md "Newton finish")
 NEWTON_STEPS = 500
-# relative round-off of the energy sum (float64 accumulation of float32 or float64 terms)
-ENERGY_NOISE = {wp.float32: 1e-7, wp.float64: 1e-12}
+
+
+class RelaxationError(RuntimeError):
+    """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped, `.x` the positions
+    there, `.round_off` whether it stopped because no lower energy could be resolved, `.iterations`
+    how many it took."""
+
+    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False, iterations: int = 0):
+        super().__init__(message)
+        self.residual = residual
+        self.x = x
+        self.round_off = round_off
+        self.iterations = iterations
 
 
 def _inverse_stiffness(shell) -> np.ndarray:
@@ -89,6 +101,7 @@ class Relaxation:
             self.flags, self.condition = wp.zeros(FLAGS_SIZE, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
         self.history = None  # E after each accepted step, capacity max_iterations + 1
         self.forget_graphs()
+        shell.listen(self.forget_graphs)  # a new V̄ or term: the captured loop is captured anew
         # autodiff forces allocate per evaluation (Tape): they run the same loop from the host
         self.capture = shell.gradient != "autodiff"
 
@@ -118,8 +131,7 @@ class Relaxation:
             modules = (kernels_relax, kernels_shell, kernels_reduce)
             if shell.self_contact is not None:
                 modules += (kernels_self_contact, kernels_limit_surface, kernels_contact)
-            run_steps(solve, 1, device=shell.device, graphs=graphs, modules=modules, capture=self.capture,
-                      revision=shell.revision)  # fmt: skip
+            run_steps(solve, 1, device=shell.device, graphs=graphs, modules=modules, capture=self.capture)
         return self._result(tol, out)
 
     def forget_graphs(self) -> None:
@@ -177,8 +189,6 @@ class Relaxation:
                     callback(int(flags[ITERATION]), search[ENERGY], search[RESIDUAL])
 
     def _result(self, tol: float, out):
-        from .shell import RelaxationError
-
         flags, search = self.flags.numpy(), self.search.numpy()
         iterations, status, residual = int(flags[ITERATION]), int(flags[STATUS]), float(search[RESIDUAL])
         self.shell.relax_history = self.history.numpy()[: iterations + 1].tolist()
@@ -217,8 +227,6 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
     "auto" hands over to Newton where CG spent its budget or stopped at round-off more than
     ROUND_OFF_SLACK × tol away (nearer is the dtype's floor: it raises), not with self-contact.
     """
-    from .shell import RelaxationError
-
     checked_method(method)
     if method == "newton":
         return _newton(shell, x.numpy().astype(np.float64), tol, newton_steps, callback, out, [], 0)
@@ -234,9 +242,6 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
 
 def _newton(shell, x0: np.ndarray, tol: float, steps: int, callback, out, history: list, iterations: int):
     """The Newton finish (wavewarp/newton.py) from x0; the result as `relax` returns it."""
-    from .newton import NewtonFinish
-    from .shell import RelaxationError
-
     if shell._newton is None:
         shell._newton = NewtonFinish(shell)
     x, status, residual, energies = shell._newton.run(x0, tol, steps, callback, iterations)

@@ -12,6 +12,7 @@ import importlib
 import importlib.util
 import math
 import os
+import pkgutil
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,8 @@ from .self_contact import SelfContact
 from .shell import Shell
 from .unfolding import first_arrival
 from .initial import gaussian_pulse, steady_front
-from .waves import TRANSPORTS, BlowUpError, Telegraph, TimeStepError, telegraph_total
+from .chemistry import TRANSPORTS, telegraph_total
+from .waves import BlowUpError, Telegraph, TimeStepError
 
 
 class SceneError(ValueError):
@@ -92,6 +94,20 @@ def resumed(parameters: dict, stored: dict) -> dict:
     return {**values, **stored}
 
 
+def scene_descriptions() -> dict[str, str]:
+    """Scene name -> one-line description, from the modules of `wavewarp.scenes`."""
+    from . import scenes
+
+    found = {}
+    for info in pkgutil.iter_modules(scenes.__path__):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"wavewarp.scenes.{info.name}")
+        name = getattr(module, "NAME", info.name.replace("_", "-"))
+        found[name] = getattr(module, "DESCRIPTION", "")
+    return dict(sorted(found.items()))
+
+
 def load_scene(name_or_path: str):
     """The scene module: a name from `wavewarp.scenes` or the path of a scene script."""
     if name_or_path.endswith(".py") or os.sep in name_or_path:
@@ -101,8 +117,6 @@ def load_scene(name_or_path: str):
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
     else:
-        from .cli import scene_descriptions
-
         known = scene_descriptions()
         if name_or_path not in known:
             raise SceneError(f"unknown scene {name_or_path!r}; valid: {', '.join(known)}")

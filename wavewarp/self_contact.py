@@ -96,7 +96,7 @@ class SelfContact:
                 break
             self.capacity = int(1.5 * most)
             self.neighbours = wp.zeros((len(self.built), self.capacity), dtype=wp.int32, device=self.shell.device)
-            self.shell.revision += 1  # captured loops read the old table
+            self.shell.notify_model_changed()  # captured loops read the old table
         self.searches += 1
 
     def mark_moved(self, flags: wp.array, far_slot: int, near_slot: int) -> None:

@@ -14,6 +14,7 @@ host round-trips, for steppers; the NumPy methods are the public API.
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 import warp as wp
@@ -40,19 +41,6 @@ from .relax import NEWTON_STEPS, relax
 
 MODELS = {"koiter": 0, "bilayer": 1}
 GRADIENTS = ("analytic", "autodiff")
-
-
-class RelaxationError(RuntimeError):
-    """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped, `.x` the positions
-    there, `.round_off` whether it stopped because no lower energy could be resolved, `.iterations`
-    how many it took."""
-
-    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False, iterations: int = 0):
-        super().__init__(message)
-        self.residual = residual
-        self.x = x
-        self.round_off = round_off
-        self.iterations = iterations
 
 
 class Shell:
@@ -126,7 +114,7 @@ class Shell:
                 self._entry_triangle = wp.array(triangle, dtype=wp.int32)
             else:
                 self._jets = wp.zeros((1, 6), dtype=self.vec3)
-        self.revision = 0  # counts changes of V̄ and of the terms: captured steps re-capture (device.run_steps)
+        self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
         self._c_host = None
@@ -134,6 +122,27 @@ class Shell:
         self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
         self.newton_steps = 0  # Newton steps of the last relaxation
         self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
+
+    def twin(self, dtype: str):
+        """The same shell (terms, options, V̄) in another dtype on the same device: the Newton finish of a
+        float32 shell works on its float64 twin. Self-contact is not copied."""
+        twin = Shell(self.mesh, self.thickness, self.young, self.poisson, self.AC, self.AI, self.volume_penalty,
+                     self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
+                     bilayer_radius=self.bilayer_radius, device=self.device, dtype=dtype)  # fmt: skip
+        twin.rest_volume = self.rest_volume
+        return twin
+
+    def listen(self, notify) -> None:
+        """Call `notify()` (a bound method, held weakly) whenever V̄ or the set of terms changes: the
+        solvers' captured graphs hold them as launch arguments and must be captured anew."""
+        self._listeners.append(weakref.WeakMethod(notify))
+
+    def notify_model_changed(self) -> None:
+        """Tell every listening solver that the model changed (V̄, a term, a term's tables)."""
+        live = [reference for reference in self._listeners if reference() is not None]
+        self._listeners = live
+        for reference in live:
+            reference()()
 
     @property
     def rest_volume(self) -> float:
@@ -144,7 +153,7 @@ class Shell:
     @rest_volume.setter
     def rest_volume(self, volume) -> None:
         self._rest_volume = finite("rest_volume", volume)
-        self.revision += 1  # captured loops hold the old V̄ as a launch argument
+        self.notify_model_changed()  # captured loops hold the old V̄ as a launch argument
 
     @property
     def self_contact(self):
@@ -158,7 +167,7 @@ class Shell:
         if term is not None and (not isinstance(term, SelfContact) or term.shell is not self):
             raise ValueError("self_contact must be None or a SelfContact built for this shell")
         self._self_contact = term
-        self.revision += 1  # captured loops hold the old set of terms
+        self.notify_model_changed()  # captured loops hold the old set of terms
 
     # ---------------------------------------------------------------- device-level API
     def _s(self, value) -> object:

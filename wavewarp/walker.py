@@ -24,7 +24,8 @@ from .balance import ChemicalBalance, FirstArrival, arrival_measurements
 from .scene import TRANSPORT, Param, WaveClock, frame_png, mean_edge, scene_mesh
 from .shell import Shell
 from .initial import gaussian_pulse
-from .waves import FitzHughNagumo, fhn_kinetic_period
+from .chemistry import fhn_kinetic_period
+from .waves import FitzHughNagumo
 
 WALKER_PARAMETERS = {
     "young": Param(200.0, "Y (ours): the sphere walker's elastic sag under its weight is about 1% of R "
@@ -201,7 +202,8 @@ class WalkerRun(WaveClock):
                 "trace": self._frame_trace}  # fmt: skip
 
     def _record_trace_row(self) -> None:
-        self.dynamics.launch_trace_row(self.wave.c, self.origin_vertex, self._trace_row, self._trace_rows)
+        self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self.origin_vertex, self._trace_row,
+                                              self._trace_rows)  # fmt: skip
         self.arrival.launch(self.wave.c)
 
     def advance_frame(self) -> None:

@@ -1,0 +1,62 @@
+"""The guarded run of a step on the device: one loop for every solver and coupling.
+
+`GuardedRunner.run(steps)` calls a step function in chunks of at most `check_every` steps. Before
+a chunk it backs up the protected arrays and clears the flags (`reset`); the chunk runs as one
+captured graph (CUDA, or Warp's CPU graph; one per chunk length, dropped by `invalidate`); after it
+`check(chunk)` reads the flags and returns an exception or None. On an exception the arrays are
+restored, `restore()` re-derives what depends on them, and the exception is raised: no NaN is
+ever left in the state. The only host round-trip is the check, once per chunk.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .checks import count
+from .device import run_steps
+
+
+class GuardedRunner:
+    """Runs `step()` in guarded chunks. `protected()` lists the arrays to back up (called per chunk, so
+    it may change); `reset()` clears the flags before a chunk; `check(chunk)` returns an exception or
+    None after it; `restore()` runs after a failed chunk's arrays are put back; `modules` are the kernel
+    modules a step launches (loaded before capture)."""
+
+    def __init__(self, step, *, protected, check, device, modules, capture: bool, check_every: int = 100,
+                 reset=None, restore=None):  # fmt: skip
+        self.step, self.protected, self.check = step, protected, check
+        self.reset, self.restore = reset, restore
+        self.device, self.modules, self.capture = device, tuple(modules), bool(capture)
+        self.check_every = count("check_every", check_every, 1)
+        self._graphs = {}
+        self._backups = None
+
+    def invalidate(self) -> None:
+        """Drop the captured graphs: they hold the launch arguments (dt, arrays, terms) they were captured with."""
+        self._graphs.clear()
+
+    def run(self, steps: int, done=None) -> None:
+        """Run `steps` steps; `done(chunk)` is called after every chunk that passed its check."""
+        steps = count("steps", steps, 0)
+        finished = 0
+        while finished < steps:
+            chunk = min(self.check_every, steps - finished)
+            arrays = self.protected()
+            if self._backups is None or [b.shape for b in self._backups] != [a.shape for a in arrays]:
+                self._backups = [wp.empty_like(a) for a in arrays]
+            for backup, a in zip(self._backups, arrays):
+                wp.copy(backup, a)
+            if self.reset is not None:
+                self.reset()
+            run_steps(self.step, chunk, device=self.device, graphs=self._graphs, modules=self.modules,
+                      capture=self.capture)  # fmt: skip
+            failure = self.check(chunk)
+            if failure is not None:
+                for backup, a in zip(self._backups, arrays):
+                    wp.copy(a, backup)
+                if self.restore is not None:
+                    self.restore()
+                raise failure
+            finished += chunk
+            if done is not None:
+                done(chunk)
