@@ -1,3 +1,4 @@
 """Benchmarks, run as `wavewarp bench NAME` (or `python benchmarks/NAME.py`); each writes JSON (most a PNG chart too)."""
 
-NAMES = ("accuracy", "buckling_mobility", "buckling_stability", "chemistry", "limit_surface", "locomotion", "numbering", "shell", "speed", "stability")  # modules with main(argv); numpy_shell is a baseline
+NAMES = ("accuracy", "buckling_mobility", "buckling_stability", "chemistry", "limit_surface", "locomotion", "numbering",
+         "quick_identity", "shell", "speed", "stability", "warp_libraries")  # fmt: skip  # modules with main(argv); numpy_shell is a baseline

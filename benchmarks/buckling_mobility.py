@@ -24,12 +24,13 @@ def run_buckling(substeps: int, *, device, level: int, dtype: str, t_end: float 
     """One buckling run with N = `substeps` mobility steps per chemistry step."""
     from wavewarp.coupled import Walking
     from wavewarp.dynamics import OverdampedDynamics
-    from wavewarp.scene import load_scene, resolve, symmetry_number
+    from wavewarp.measurements import symmetry_number
+    from wavewarp.parameters import load_scene, resolve
     from wavewarp.waves import BlowUpError, OscillationError, TimeStepError
 
     module = load_scene("buckling")
     # the mobility model steps the shell without relaxations, so it has no self-contact (wavewarp/self_contact.py)
-    p = resolve(module.PARAMETERS, None, [f"level={level}", f"dtype={dtype}", f"t_end={t_end}", "self_contact=false"])
+    p = resolve(module.Parameters, None, [f"level={level}", f"dtype={dtype}", f"t_end={t_end}", "self_contact=false"])
     run = module.build(p, device=device, report=lambda message: None)
     x0 = run.coupled.positions()  # the scene's first relaxation under the initial pulse
     omega = OverdampedDynamics(run.shell, density=1.0, drag=1.0, x0=x0).omega_max
@@ -37,7 +38,7 @@ def run_buckling(substeps: int, *, device, level: int, dtype: str, t_end: float 
     drag = omega**2 * dt_c / (2 * 0.9 * substeps)
     dynamics = OverdampedDynamics(run.shell, density=1.0, drag=drag, x0=x0, omega=omega, check_every=10**9)
     coupled = Walking(dynamics, run.wave, sensitive=True, check_every=max(1, 2000 // substeps))
-    t_stop = p["t_end"] or math.pi * p["radius"] / p["gamma"]
+    t_stop = p.t_end or math.pi * p.radius / p.gamma
     rows, status, start = [], "done", time.perf_counter()
     while run.wave.time < t_stop:
         try:
@@ -48,7 +49,7 @@ def run_buckling(substeps: int, *, device, level: int, dtype: str, t_end: float 
         run.profile_time = run.wave.time
         x = dynamics.positions()
         n, amplitude = symmetry_number(run, x)
-        rows.append([run.wave.time, n, amplitude, float(x[:, 2].max() - x[:, 2].min()) / p["radius"]])
+        rows.append([run.wave.time, n, amplitude, float(x[:, 2].max() - x[:, 2].min()) / p.radius])
     return {"substeps": coupled.substeps, "drag": drag, "omega_max": omega, "dt_c": dt_c, "status": status,
             "wall_time_s": time.perf_counter() - start, "columns": ["t", "n", "amplitude_h", "height_R"], "rows": rows}  # fmt: skip
 

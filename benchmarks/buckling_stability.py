@@ -27,6 +27,8 @@ import math
 import os
 import time
 
+from dataclasses import replace
+
 import numpy as np
 
 BUMP_ORDERS = (3, 4, 5, 6, 8)
@@ -35,10 +37,10 @@ BUMP_ORDERS = (3, 4, 5, 6, 8)
 def perfect_path(*, device, level: int, t_end: float, frames: int):
     """The buckling scene's run for a perfect sphere (no imperfection, no self-contact, float64,
     Newton-finished relaxations), and its frames (x, c) as it advances."""
-    from wavewarp.scene import load_scene, resolve
+    from wavewarp.parameters import load_scene, resolve
 
     module = load_scene("buckling")
-    p = resolve(module.PARAMETERS, None, [f"level={level}", "dtype=float64", "noise=0", "self_contact=false",
+    p = resolve(module.Parameters, None, [f"level={level}", "dtype=float64", "noise=0", "self_contact=false",
                                           "relax_method=auto", "overdamped=false", f"t_end={t_end}",
                                           f"frames={frames}"])  # fmt: skip
     run = module.build(p, device=device, report=lambda message: None)
@@ -60,17 +62,17 @@ def stored_path(path: str, *, device):
     import h5py
 
     from wavewarp.mesh import Mesh
-    from wavewarp.scene import load_scene, resolve
+    from wavewarp.parameters import load_scene, resumed
 
     with h5py.File(path, "r") as f:
         module = load_scene(str(f.attrs["scene"]))
-        p = {**resolve(module.PARAMETERS), **json.loads(f.attrs["parameters"])}
+        p = resumed(module.Parameters, json.loads(f.attrs["parameters"]))
         mesh = Mesh(f["mesh/rest_positions"][...], f["mesh/triangles"][...])
         times, positions, concentrations = (f[f"frames/{name}"][...] for name in ("time", "positions", "concentration"))
-    if p.get("self_contact"):
+    if getattr(p, "self_contact", False):
         raise ValueError(f"{path}: its frames were relaxed with self-contact, which the Hessian has not; "
                          "analyse a run made with --set self_contact=false")  # fmt: skip
-    p.update(dtype="float64", noise=0.0, self_contact=False)  # the stored rest mesh carries the imperfection
+    p = replace(p, dtype="float64", noise=0.0, self_contact=False)  # the stored rest mesh carries the imperfection
     run = module.build(p, mesh=mesh, device=device, report=lambda message: None)
     return run, zip(times, positions, concentrations)
 
@@ -78,15 +80,15 @@ def stored_path(path: str, *, device):
 def stability_path(run, frames, *, count: int, bump: float, bump_frames) -> dict:
     """Softest modes at every frame (t, x, c) of `run`'s path, and finite bumps at `bump_frames`."""
     from wavewarp.modes import azimuthal_order, softest_modes
-    from wavewarp.scene import polar_coordinates, shape_asymmetry
+    from wavewarp.measurements import polar_coordinates, shape_asymmetry
 
     p, shell = run.p, run.shell
-    R, h = p["radius"], p["thickness"]
-    unit = p["young"] * h / R**2
+    R, h = p.radius, p.thickness
+    unit = p.young * h / R**2
     theta, phi = polar_coordinates(run)  # about the wave's axis, as the scene's own measurements
     rows, bumps, start = [], [], time.perf_counter()
     for frame, (t, x, c) in enumerate(frames):
-        front = (run.front_start + p["gamma"] * t) / R
+        front = (run.front_start + p.gamma * t) / R
         modes = softest_modes(shell, x, c, count)
         orders = [azimuthal_order(x, v, axis=run.origin) for v in modes.vectors]
         where = [float(np.degrees(np.sum(theta * np.sum(v**2, axis=1)) / np.sum(v**2))) for v in modes.vectors]
@@ -96,7 +98,7 @@ def stability_path(run, frames, *, count: int, bump: float, bump_frames) -> dict
         if frame in bump_frames:
             bumps += relaxed_bumps(shell, x, c, theta, phi, front, bump * h, h)
     kept = ("radius", "thickness", "AI", "AC", "width", "level", "young")
-    return {"scene": run.name, "parameters": {k: p[k] for k in kept}, "value_unit": "Y h / R^2",
+    return {"scene": run.name, "parameters": {k: getattr(p, k) for k in kept}, "value_unit": "Y h / R^2",
             "wall_time_s": time.perf_counter() - start,
             "columns": ["t", "front_deg", "values", "orders", "polar_deg", "asymmetry_h", "asymmetry_m"], "rows": rows,
             "bump_columns": ["front_deg", "m", "energy_change_relative", "max_distance_h", "ring_mode_h"],

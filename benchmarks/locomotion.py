@@ -27,10 +27,10 @@ QUICK = {"sphere-walker": ["level=2"], "prism-walker": ["divisions=4"]}
 
 def run_walker(scene: str, sensitive: bool, *, device, periods: float, overrides=()) -> tuple:
     """One walker run through the scene API; returns (summary, trace)."""
-    from wavewarp.scene import load_scene, resolve
+    from wavewarp.parameters import load_scene, resolve
 
     module = load_scene(scene)
-    p = resolve(module.PARAMETERS, None, [*overrides, f"sensitive={str(sensitive).lower()}", f"periods={periods}"])
+    p = resolve(module.Parameters, None, [*overrides, f"sensitive={str(sensitive).lower()}", f"periods={periods}"])
     start = time.perf_counter()
     run = module.build(p, device=device, report=lambda message: None)
     run.record(run.time, run.frame())
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
 
     from wavewarp.device import resolve_device
     from wavewarp.io import write_json
-    from wavewarp.walker import locomotion_png
+    from wavewarp.figures import locomotion_png
 
     parser = argparse.ArgumentParser(prog="wavewarp bench locomotion", description=__doc__.split("\n")[0])
     parser.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")

@@ -57,7 +57,7 @@ def compare(path: str, reference: str) -> dict:
 
 def main(argv=None) -> int:
     from wavewarp.io import write_json
-    from wavewarp.scene import scene_descriptions
+    from wavewarp.parameters import scene_descriptions
 
     parser = argparse.ArgumentParser(prog="wavewarp bench quick_identity", description=__doc__.split("\n")[0])
     parser.add_argument("--out", required=True, help="folder for SCENE.h5 (and quick_identity.json)")

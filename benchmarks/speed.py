@@ -39,12 +39,12 @@ from wavewarp.io import write_json, write_png  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
 from wavewarp.mesh import Mesh, icosphere  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
-from wavewarp.walker import WALKER_PARAMETERS, ground_lift  # noqa: E402
+from wavewarp.walker import WalkerParameters, ground_lift  # noqa: E402
 from wavewarp.initial import gaussian_pulse  # noqa: E402
 from wavewarp.waves import FitzHughNagumo  # noqa: E402
 
 RADIUS, THICKNESS, AC, MU_V = 25.0, 2.1, 0.1, 0.4  # the sphere walker (scenes/sphere_walker.py)
-WALKER = {name: param.default for name, param in WALKER_PARAMETERS.items()}
+WALKER = vars(WalkerParameters())
 
 
 def seconds_per_call(call, device, budget: float, repeats: int = 5) -> float:

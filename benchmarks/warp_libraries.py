@@ -575,7 +575,7 @@ def main(argv=None) -> int:
     print("\nours / Warp's time (> 1: Warp's is faster):")
     for entry in result["ratios"]:
         extra = f"  colours {entry['colours_ours']} vs {entry['colours_warp']}" if entry["item"] == "colouring" else ""
-        print(f"  {entry['item']:9s} L{entry['level']} {entry['dtype'] or 'host':7s} vs {entry['warp']:22s}: "
+        print(f"  {entry['item']:9s} L{entry['level']} {entry['dtype'] or 'host':7s} vs {entry['warp']:26s}: "
               f"{entry['ours_over_warp']:7.3f}{extra}")  # fmt: skip
     json_path = os.path.join(args.out, "warp_libraries.json")
     write_json(json_path, result)

@@ -1,10 +1,10 @@
-"""Koiter shell energy and exact forces at quadrature points (SPEC §3).
+"""Koiter shell energy and exact forces at quadrature points (docs/theory/shell.md).
 
 Global sums (energy, volume) accumulate in float64 whatever the dtype, so that float32 runs
 resolve energy changes and V - V̄ far below the float32 spacing of their totals.
 
 One thread per quadrature point. The active reference (ā⁻¹, ā, b̄, dω̄ weight) is computed by
-`active_reference_kernel` whenever c changes; the energy kernels read it. Forces are the exact
+`koiter_reference_kernel` or `bilayer_reference_kernel` whenever c changes; the energy kernels read it. Forces are the exact
 negative gradient, scattered to the patch's control vertices with atomics, or (deterministic)
 kept per point as a gradient jet (g, g,1, g,2, g,11, g,12, g,22) and gathered per vertex in a
 fixed order: no atomics, bitwise-reproducible sums.
@@ -18,14 +18,22 @@ from . import declare_overloads
 from .limit_surface import basis_row, entry_point, first_form, patch_jet, patch_scalar, second_form
 from .reduce import block_add
 
-KOITER = wp.constant(0)
-BILAYER = wp.constant(1)
 MAX_PATCH = wp.constant(18)  # control vertices of a patch (valence N + 6): vertices of valence up to 12
 VolumeMoments = wp.types.vector(length=7, dtype=wp.float64)  # [S, ⅓ ∫ x·n dω, Σ x_I] (`volume_kernel`)
 
 
+@wp.func
+def store_reference(q: int, a_bar: Any, b_bar: Any, weight: Any, ref_metric: wp.array(dtype=Any),
+                    ref_metric_inv: wp.array(dtype=Any), ref_curvature: wp.array(dtype=Any), ref_weight: wp.array(dtype=Any)):  # fmt: skip
+    """The active reference at q: ā, ā⁻¹, b̄ and the reference area weight sqrt(det ā) w."""
+    ref_metric[q] = a_bar
+    ref_metric_inv[q] = wp.inverse(a_bar)
+    ref_curvature[q] = b_bar
+    ref_weight[q] = wp.sqrt(wp.determinant(a_bar)) * weight
+
+
 @wp.kernel
-def active_reference_kernel(
+def koiter_reference_kernel(
     c: wp.array(dtype=Any),
     patch_start: wp.array(dtype=wp.int32),
     patch_vertices: wp.array(dtype=wp.int32),
@@ -35,31 +43,50 @@ def active_reference_kernel(
     points_per_triangle: int,
     rest_metric: wp.array(dtype=Any),
     rest_curvature: wp.array(dtype=Any),
-    model: int,
     AC: Any,
     AI: Any,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+):
+    """ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰ (paper Eq. 2; docs/theory/shell.md)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
+    a_bar = wp.exp(-AC * cq) * rest_metric[q]
+    b_bar = (type(cq)(1.0) - AI * cq) * rest_curvature[q]
+    store_reference(q, a_bar, b_bar, weights[q % points_per_triangle], ref_metric, ref_metric_inv, ref_curvature,
+                    ref_weight)  # fmt: skip
+
+
+@wp.kernel
+def bilayer_reference_kernel(
+    c: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    rest_metric: wp.array(dtype=Any),
+    rest_curvature: wp.array(dtype=Any),
+    AC: Any,
     bilayer_A: Any,
     ref_metric: wp.array(dtype=Any),
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
     ref_weight: wp.array(dtype=Any),
 ):
-    """ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰ (paper Eq. 2); bilayer: b̄ = Λ b̄⁰ - A c ā⁰ (docs/shell.md)."""
+    """ā = Λ² ā⁰ with Λ² = e^{-AC c}, b̄ = Λ b̄⁰ - A c ā⁰ (the supplement's bilayer; docs/theory/shell.md)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
     cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
-    one = type(cq)(1.0)
     stretch = wp.exp(-AC * cq)
     a0 = rest_metric[q]
-    a_bar = stretch * a0
-    if model == KOITER:
-        b_bar = (one - AI * cq) * rest_curvature[q]
-    else:
-        b_bar = wp.sqrt(stretch) * rest_curvature[q] - (bilayer_A * cq) * a0
-    ref_metric[q] = a_bar
-    ref_metric_inv[q] = wp.inverse(a_bar)
-    ref_curvature[q] = b_bar
-    ref_weight[q] = wp.sqrt(wp.determinant(a_bar)) * weights[q % points_per_triangle]
+    b_bar = wp.sqrt(stretch) * rest_curvature[q] - (bilayer_A * cq) * a0
+    store_reference(q, stretch * a0, b_bar, weights[q % points_per_triangle], ref_metric, ref_metric_inv, ref_curvature,
+                    ref_weight)  # fmt: skip
 
 
 @wp.func
@@ -358,10 +385,10 @@ def negate_kernel(a: wp.array(dtype=Any), out: wp.array(dtype=Any)):
 _PATCH = dict(basis="vec6[,]")
 _REFERENCE = dict(ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]")
 _MODULI = dict(stretching_modulus="scalar", bending_modulus="scalar", nu="scalar")
-declare_overloads(
-    active_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]", rest_curvature="mat22[]",
-    AC="scalar", AI="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE,
-)  # fmt: skip
+declare_overloads(koiter_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]",
+                  rest_curvature="mat22[]", AC="scalar", AI="scalar", **_PATCH, **_REFERENCE)  # fmt: skip
+declare_overloads(bilayer_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]",
+                  rest_curvature="mat22[]", AC="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE)  # fmt: skip
 declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
 declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", jets="vec3[,]",
                   **_PATCH, **_REFERENCE, **_MODULI)  # fmt: skip

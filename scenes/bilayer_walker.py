@@ -1,8 +1,8 @@
-"""Bilayer walker (supplement Movie 10; SPEC §3, §6): the sphere walker actuated through the bilayer model."""
+"""Bilayer walker (supplement Movie 10): the sphere walker actuated through the bilayer model."""
 
 from wavewarp.walker import sphere_walker_run
 
-from wavewarp.scenes.sphere_walker import PARAMETERS, QUICK  # noqa: F401 — the same sphere, coupling and chemistry
+from wavewarp.scenes.sphere_walker import QUICK, Parameters  # noqa: F401 — the same sphere, coupling and chemistry
 
 NAME = "bilayer-walker"
 DESCRIPTION = "bilayer walker: the sphere walker with the bilayer shell model (ā = Λ² ā⁰, b̄ = Λ b̄⁰ - A c ā⁰; Movie 10)"
@@ -10,4 +10,4 @@ DESCRIPTION = "bilayer walker: the sphere walker with the bilayer shell model (�
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     del seed  # deterministic
-    return sphere_walker_run(NAME, p, mesh=mesh, device=device, model="bilayer", report=report)
+    return sphere_walker_run(NAME, p, mesh=mesh, device=device, bilayer=True, report=report)

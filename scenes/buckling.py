@@ -1,30 +1,42 @@
-"""Buckling (supplement Fig. S1a, Movie 8; SPEC §6): a curvature wave buckles a thin sphere into n-fold patterns."""
+"""Buckling (supplement Fig. S1a, Movie 8): a curvature wave buckles a thin sphere."""
 
-from wavewarp.scene import SPHERE_PARAMETERS, Param, buckling_measurements, buckling_png, sphere_wave_run, symmetry_number
+from dataclasses import dataclass
+
+from wavewarp.figures import buckling_png
+from wavewarp.measurements import buckling_measurements, symmetry_number
+from wavewarp.parameters import param
+from wavewarp.quasistatic import SphereParameters, sphere_wave_run
 
 NAME = "buckling"
 DESCRIPTION = "buckling sphere, R/h = 20, AI = 11, AC = 0: telegraph wave from the pole, seeded noise (Fig. S1a)"
-PARAMETERS = {
-    **SPHERE_PARAMETERS,
-    "AC": Param(0.0, "metric coupling (SPEC §6)"),
-    "AI": Param(11.0, "curvature coupling (SPEC §6)"),
-    "mu_v": Param(0.0, "volume penalty μV in units of Y h / R⁴ (SPEC §6: none)", minimum=0.0),
-    "overdamped": Param(True, "buckling is an instability: near it a relaxation may not converge within its budget; "
-                        "the paper's overdamped update lets the shell lag its reference there (counted in --json)"),
-    "relax_iterations": Param(2000, "NCG iterations per relaxation (the overdamped budget)", minimum=1),
-    "relax_method": Param("ncg", "ncg: the budget is the overdamped shell's lag, so no Newton finish (auto and "
-                          "newton need self_contact=false)", choices=("auto", "ncg", "newton")),  # fmt: skip
-    "adaptive_dt": Param(True, "where a sharpening fold lowers the wave's stability bound below dt, go on at 0.9 × "
-                         "the bound (the leapfrog re-centred, relaxations at the same time interval) instead of "
-                         "stopping; dt returns when the bound allows"),  # fmt: skip
-    "self_contact": Param(True, "keep the layers apart where the everted cap meets the far side (ours; SPEC has none): "
-                          "contact distance h, docs/shell.md \"Self-contact\""),  # fmt: skip
-    "noise": Param(1e-4, "rest-shape imperfection / R: the tiny seeded perturbation that breaks the symmetry",
-                   minimum=0.0),
-}
-QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3, coarser than the default
+
+
+@dataclass(frozen=True)
+class BucklingParameters(SphereParameters):
+    """What the buckling scenes share: an overdamped shell that may lag its reference, self-contact, the
+    adaptive chemistry step and a seeded imperfection."""
+
+    AI: float = param(11.0, "curvature coupling AI (the paper's)")
+    overdamped: bool = param(True, "accept a relaxation that spends its budget: the shell lags its reference near the "
+                             "instability")  # fmt: skip
+    relax_iterations: int = param(2000, "CG iterations per relaxation (the overdamped shell's budget)", minimum=1)
+    relax_method: str = param("ncg", "ncg: CG only (auto and newton need self_contact=false)",
+                              choices=("auto", "ncg", "newton"))  # fmt: skip
+    adaptive_dt: bool = param(True, "where a sharpening fold lowers the wave's stability bound below dt, step on at "
+                              "0.9 × the bound; dt returns when the bound allows")  # fmt: skip
+    self_contact: bool = param(True, "keep the layers apart where the everted cap meets the far side")
+    noise: float = param(1e-4, "rest-shape imperfection / R (seeded by --seed): breaks the symmetry", minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Parameters(BucklingParameters):
+    pass
+
+
+QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, report=report, profile=symmetry_number,
-                           measure=buckling_measurements, figures={"symmetry": buckling_png})
+                           measure=buckling_measurements, figures={"symmetry": buckling_png},
+                           self_contact=p.self_contact, adaptive_dt=p.adaptive_dt)  # fmt: skip

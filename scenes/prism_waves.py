@@ -1,9 +1,11 @@
-"""Prism wave guide (paper Fig. 2; SPEC §6): the opposite face shows a 3- or 5-fold imprint."""
+"""Prism wave guide (paper Fig. 2): the face opposite the origin shows a 3- or 5-fold imprint."""
 
 import math
+from dataclasses import dataclass
 
 from wavewarp.mesh import prism
-from wavewarp.scene import BOX_PARAMETERS, Param, box_wave_run
+from wavewarp.parameters import param
+from wavewarp.quasistatic import BoxParameters, box_wave_run
 from wavewarp.unfolding import prism_faces, prism_fronts
 
 NAME = "prism-waves"
@@ -14,8 +16,14 @@ ORIGINS = {  # in units of L; the triangular caps lie at z = ±L/2, one corner t
     "edge": (0.0, -0.5 * _R, 0.5),  # midpoint of the cap edge opposite the +y corner
     "vertex": (0.0, _R, 0.5),
 }
-PARAMETERS = {**BOX_PARAMETERS, "origin": Param("face", "where the pulse starts", choices=tuple(ORIGINS))}
-QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}  # --quick: a smoke test, coarser than the default
+
+
+@dataclass(frozen=True)
+class Parameters(BoxParameters):
+    origin: str = param("face", "where the pulse starts", choices=tuple(ORIGINS))
+
+
+QUICK = {"divisions": 4, "frames": 3, "t_end": 4.0, "rule": "3"}  # --quick: a smoke test, 4 divisions
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

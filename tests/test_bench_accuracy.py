@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from wavewarp.benchmarks.accuracy import FAMILIES, closed_form_stretch, front_reference, telegraph_modes
+from wavewarp.benchmarks.accuracy_cases import FAMILIES, closed_form_stretch, front_reference, telegraph_modes
 from wavewarp.cli import main as cli
-from wavewarp.scene import scene_descriptions
+from wavewarp.parameters import scene_descriptions
 
 CONFIGURATIONS = {"spectrum": {"sphere"}, "telegraph": {"modes", "pulse", "wide pulse"}, "radius": set(FAMILIES),
                   "arrival": {"sphere", "cube"}, "front": {"sphere"}}  # fmt: skip

@@ -66,13 +66,13 @@ def test_usd_animation_is_atomic_and_keeps_frames_on_interrupt(tmp_path):
     path = tmp_path / "a.usd"
     with pytest.raises(RuntimeError):
         with UsdAnimation(path, mesh.triangles) as usd:
-            usd.add_frame(mesh.vertices, np.zeros(mesh.n_vertices))
+            usd.add_frame(0.0, {"positions": mesh.vertices, "concentration": np.zeros(mesh.n_vertices)})
             raise RuntimeError("crash")
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(KeyboardInterrupt):
         with UsdAnimation(path, mesh.triangles) as usd:
             for k in range(3):
-                usd.add_frame(mesh.vertices * (1 + 0.1 * k), np.full(mesh.n_vertices, k / 2))
+                usd.add_frame(k, {"positions": mesh.vertices * (1 + 0.1 * k), "concentration": np.full(mesh.n_vertices, k / 2)})
             raise KeyboardInterrupt
     stage = Usd.Stage.Open(str(path))
     assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, 2)
@@ -87,7 +87,7 @@ def test_non_finite_frames_are_refused(tmp_path):
     x[3] = np.nan
     with pytest.raises(ValueError, match="non-finite"):
         with UsdAnimation(tmp_path / "b.usd", mesh.triangles) as usd:
-            usd.add_frame(x)
+            usd.add_frame(0.0, {"positions": x})
     assert list(tmp_path.iterdir()) == []
 
 

@@ -256,7 +256,7 @@ def test_overdamped_stability_bound_is_two_drag_over_omega_squared_and_sharp(rng
 def test_overdamped_gradient_flow_reaches_the_closed_form_radius():
     """No ground, no gravity: the mobility model is a gradient flow and comes to rest at the
     quasi-static equilibrium: under uniform c, the closed-form sphere radius (SPEC §8)."""
-    from wavewarp.benchmarks.accuracy import closed_form_stretch
+    from wavewarp.benchmarks.accuracy_cases import closed_form_stretch
 
     R, h, AC, AI = 1.0, 0.05, 0.3, 0.5
     mesh = icosphere(R, 3)

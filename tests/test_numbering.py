@@ -10,7 +10,7 @@ import wavewarp.mesh as wm
 from wavewarp.geometry import limit_positions, limit_surface, patch_tables
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import Mesh, cube, hilbert_keys, icosphere, prism
-from wavewarp.scene import seeded_noise
+from wavewarp.runs import seeded_noise
 from wavewarp.shell import Shell
 
 F64 = dict(device="cpu", dtype="float64")

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from wavewarp.cli import main
-from wavewarp.scene import scene_descriptions
+from wavewarp.parameters import scene_descriptions
 from wavewarp.geometry import limit_positions
 from wavewarp.mesh import Mesh, icosphere, prism, save
-from wavewarp.scene import face_heights, load_scene, resolve
+from wavewarp.boxes import face_heights
+from wavewarp.parameters import load_scene, resolve
 from wavewarp.unfolding import first_arrival, prism_faces, prism_fronts, prism_geodesic_distance
 
 SCENES = ["ascidian", "starfish", "cube-waves", "prism-waves", "buckling", "buckling-modes"]
@@ -132,11 +133,10 @@ def test_a_blow_up_at_an_unresolved_fold_says_so(monkeypatch):
     """A wave blow-up where a vertex's lumped mass has grown 200×, or where the limit surface is
     singular (an area element at 1e-6 of its rest value), both folds sharper than the mesh, names
     the place and the fix; the same blow-up on a resolved surface is passed on unchanged."""
-    from wavewarp.scene import load_scene, resolve
     from wavewarp.waves import BlowUpError
 
     module = load_scene("buckling")
-    run = module.build(resolve(module.PARAMETERS, None, ["level=3"]), device="cpu", report=lambda message: None)
+    run = module.build(resolve(module.Parameters, None, ["level=3"]), device="cpu", report=lambda message: None)
 
     def blow_up():
         raise BlowUpError("telegraph leapfrog blew up", run.time, run.steps)
@@ -214,7 +214,7 @@ def test_mesh_file_is_refined_when_needed_and_used(tmp_path, capsys):
 
 @pytest.mark.parametrize("stop, code", [(KeyboardInterrupt, 130), ("blow-up", 1), ("time step", 1)])
 def test_interrupt_or_solver_failure_keeps_the_frames_written(stop, code, tmp_path, capsys, monkeypatch):
-    from wavewarp.scene import QuasiStaticWaveRun
+    from wavewarp.quasistatic import QuasiStaticWaveRun
     from wavewarp.waves import BlowUpError, TimeStepError
 
     original, calls = QuasiStaticWaveRun.advance_frame, []
@@ -469,7 +469,7 @@ DEPARTURES = {  # scene: {axis: (recommended, the scene's)} where the scene's ph
 
 def declared(scene) -> dict:
     """A scene's defaults on the accuracy benchmark's axes, read from its parameters."""
-    p = resolve(load_scene(scene).PARAMETERS)
+    p = vars(resolve(load_scene(scene).Parameters))
     walker = "periods" in p  # explicit FHN, no relaxation
     out = {"rule": p.get("rule", "3"), "discretization": "subdivision", "dtype": p["dtype"],  # no rule: "3"
            "mass_corrections": p["mass_corrections"],
@@ -503,7 +503,7 @@ def test_shape_asymmetry_reads_a_known_ripple_and_ignores_rigid_motion_and_axisy
     (m = 1) radial bump reads m = 1."""
     from types import SimpleNamespace
 
-    from wavewarp.scene import shape_asymmetry
+    from wavewarp.measurements import shape_asymmetry
 
     R = 10.0
     mesh = icosphere(R, 4)
@@ -533,12 +533,12 @@ def test_symmetry_number_finds_an_azimuthal_mode_and_ignores_the_axisymmetric_pr
     n = 5 with that amplitude, one of 0.05 h (below a tenth of h: not a buckle) n = 0."""
     from types import SimpleNamespace
 
-    from wavewarp.scene import symmetry_number
+    from wavewarp.measurements import symmetry_number
 
     R, h = 10.0, 0.5
     mesh = icosphere(R, 4)
     run = SimpleNamespace(size=R, mesh=mesh, origin=np.array([0.0, 0.0, R]), front_start=0.0, profile_time=9.0,
-                          p={"gamma": 1.0, "thickness": h})  # fmt: skip front at θ = 0.9
+                          p=SimpleNamespace(gamma=1.0, thickness=h))  # fmt: skip front at θ = 0.9
     rest = mesh.vertices
     unit = rest / np.linalg.norm(rest, axis=1, keepdims=True)
     theta = np.arccos(np.clip(unit[:, 2], -1, 1))

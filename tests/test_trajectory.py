@@ -28,7 +28,7 @@ def test_schema_and_attributes(tmp_path):
     path = tmp_path / "run.h5"
     with writer(path) as w:
         for k in range(3):
-            w.add_frame(0.5 * k, **frame(k))
+            w.add_frame(0.5 * k, frame(k))
     with h5py.File(path, "r") as f:
         np.testing.assert_array_equal(f["mesh/triangles"][...], MESH.triangles)
         np.testing.assert_array_equal(f["mesh/rest_positions"][...], MESH.vertices)
@@ -43,18 +43,18 @@ def test_interrupt_keeps_frames_and_errors_leave_nothing(tmp_path):
     path = tmp_path / "run.h5"
     with pytest.raises(KeyboardInterrupt):
         with writer(path) as w:
-            w.add_frame(0.0, **frame(0))
+            w.add_frame(0.0, frame(0))
             raise KeyboardInterrupt
     assert last_frame(path)["frames"] == 1
     other = tmp_path / "crash.h5"
     with pytest.raises(RuntimeError):
         with writer(other) as w:
-            w.add_frame(0.0, **frame(0))
+            w.add_frame(0.0, frame(0))
             raise RuntimeError("solver failed")
     assert os.listdir(tmp_path) == ["run.h5"]  # no partial file, no temporary left
     with pytest.raises(ValueError, match="non-finite concentration"):
         with writer(other) as w:
-            w.add_frame(0.0, positions=MESH.vertices, concentration=np.full(V, np.nan))
+            w.add_frame(0.0, {"positions": MESH.vertices, "concentration": np.full(V, np.nan)})
     assert not other.exists()
 
 
@@ -62,12 +62,12 @@ def test_resume_appends_to_the_same_file(tmp_path):
     path = tmp_path / "run.h5"
     with writer(path) as w:
         for k in range(2):
-            w.add_frame(float(k), **frame(k))
+            w.add_frame(float(k), frame(k))
     last = last_frame(path)
     assert last["time"] == 1.0 and last["frames"] == 2
     np.testing.assert_allclose(last["positions"], frame(1)["positions"])
     with writer(path, resume=True) as w:
-        w.add_frame(2.0, **frame(2))
+        w.add_frame(2.0, frame(2))
     with h5py.File(path, "r") as f:
         np.testing.assert_array_equal(f["frames/time"][...], [0.0, 1.0, 2.0])
     with pytest.raises(ValueError, match="holds scene 'test'"):

@@ -19,7 +19,7 @@ from wavewarp.coupled import QuasiStatic
 from wavewarp.initial import gaussian_pulse
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
-from wavewarp.scene import load_scene, resolve, resumed
+from wavewarp.parameters import as_dict, load_scene, resolve, resumed
 from wavewarp.shell import Shell
 from wavewarp.chemistry import telegraph_total
 from wavewarp.waves import FitzHughNagumo, Telegraph
@@ -215,10 +215,10 @@ def test_coupled_walker_keeps_the_reaction_balance():
 def test_a_trajectory_without_a_transport_resumes_with_the_material_one():
     """Files written before `transport` existed ran the material reading: a resume keeps it."""
     module = load_scene("starfish")
-    assert resolve(module.PARAMETERS)["transport"] == "conservative"
-    stored = {k: v for k, v in resolve(module.PARAMETERS).items() if k != "transport"}
-    assert resumed(module.PARAMETERS, stored)["transport"] == "material"
-    assert resumed(module.PARAMETERS, {**stored, "transport": "conservative"})["transport"] == "conservative"
+    assert resolve(module.Parameters).transport == "conservative"
+    stored = {k: v for k, v in as_dict(resolve(module.Parameters)).items() if k != "transport"}
+    assert resumed(module.Parameters, stored).transport == "material"
+    assert resumed(module.Parameters, {**stored, "transport": "conservative"}).transport == "conservative"
 
 
 def test_unknown_transport_is_refused():

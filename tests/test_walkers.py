@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from wavewarp.cli import main
-from wavewarp.scene import load_scene, resolve
+from wavewarp.parameters import load_scene, resolve
 
 
 def run_cli(capsys, *argv):
@@ -35,7 +35,7 @@ def walk(scene, **overrides):
     """A scene's run (a walker's, or any scene's) through the scene API, quick settings under `overrides`;
     returns the run after all its frames, each recorded."""
     module = load_scene(scene)
-    p = resolve(module.PARAMETERS, module.QUICK, [f"{k}={v}" for k, v in overrides.items()])
+    p = resolve(module.Parameters, module.QUICK, [f"{k}={v}" for k, v in overrides.items()])
     run = module.build(p, device="cpu", report=lambda message: None)
     run.record(run.time, run.frame())
     for _ in range(run.frames):
@@ -120,7 +120,7 @@ def test_overdamped_walker_moves_only_as_far_as_friction_can_drag_it():
     assert run.resolved["drag"] == pytest.approx(2 * dynamics.contact_damping) and dynamics.drag > 0
     assert run.resolved["mechanics_dt"] <= 2 * dynamics.drag / dynamics.omega_max**2
     moved = run.trace[-1, 2:4] - run.trace[0, 2:4]
-    bound = run.p["friction"] * run.p["gravity"] * (run.trace[-1, 0] - run.trace[0, 0]) / dynamics.drag
+    bound = run.p.friction * run.p.gravity * (run.trace[-1, 0] - run.trace[0, 0]) / dynamics.drag
     assert 0 < np.linalg.norm(moved) <= bound
 
 
@@ -130,9 +130,9 @@ def test_area_contact_walker_carries_its_weight_with_the_spec_stiffness_per_vert
     momentum balance: the contact pressure's mean over the run is W + ΔP_z / duration."""
     run = walk("prism-walker", periods=0.01, frames=1, contact="area", settle=0)
     dynamics = run.dynamics
-    area = dynamics.total_mass / run.p["density"]
+    area = dynamics.total_mass / run.p.density
     assert run.resolved["contact_area"] == pytest.approx(area / run.mesh.n_vertices, rel=1e-12)
-    assert dynamics.ground.stiffness == pytest.approx(run.p["stiffness"] / run.resolved["contact_area"])
+    assert dynamics.ground.stiffness == pytest.approx(run.p.stiffness / run.resolved["contact_area"])
     p0, times, loads = dynamics.momentum()[2], [], []
     for k in range(201):
         if k:
@@ -142,7 +142,7 @@ def test_area_contact_walker_carries_its_weight_with_the_spec_stiffness_per_vert
     times, loads = np.array(times), np.array(loads)
     duration = times[-1] - times[0]
     mean = np.sum(0.5 * (loads[1:] + loads[:-1]) * np.diff(times)) / duration  # trapezoid rule
-    weight = dynamics.total_mass * run.p["gravity"]
+    weight = dynamics.total_mass * run.p.gravity
     assert max(loads) > 1.5 * weight  # it bounced
     assert mean == pytest.approx(weight + (dynamics.momentum()[2] - p0) / duration, rel=0.02)
 
@@ -155,7 +155,7 @@ def test_insensitive_twin_keeps_the_rest_surface():
     masses = {}
     for sensitive in (True, False):
         run = walk("sphere-walker", periods=0.1, frames=1, sensitive=sensitive)
-        rest = LaplaceBeltrami(run.mesh, device="cpu", dtype=run.p["dtype"]).mass()
+        rest = LaplaceBeltrami(run.mesh, device="cpu", dtype=run.p.dtype).mass()
         masses[sensitive] = np.abs(run.operator.mass() - rest).max() / rest.max()
     assert masses[False] == 0.0
     assert masses[True] > 1e-3
@@ -211,7 +211,7 @@ def test_walker_on_cuda_follows_the_cpu_run():
     if not wp.is_cuda_available():
         pytest.skip("no CUDA device")
     module = load_scene("sphere-walker")
-    p = resolve(module.PARAMETERS, module.QUICK, ["periods=0.3", "frames=1", "dtype=float64"])
+    p = resolve(module.Parameters, module.QUICK, ["periods=0.3", "frames=1", "dtype=float64"])
     traces = []
     for device in ("cpu", "cuda:0"):
         run = module.build(p, device=device, report=lambda message: None)

@@ -26,9 +26,10 @@ from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.shell import (
     MAX_PATCH,
     VolumeMoments,
-    active_reference_kernel,
+    bilayer_reference_kernel,
     gather_forces_kernel,
     koiter_energy_kernel,
+    koiter_reference_kernel,
     negate_kernel,
     shell_forces_kernel,
     sum_kernel,
@@ -39,8 +40,41 @@ from .kernels.shell import (
 from .mesh import Mesh
 from .relax import NEWTON_STEPS, relax
 
-MODELS = {"koiter": 0, "bilayer": 1}
+MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
+
+
+class KoiterReference:
+    """The active reference of paper Eq. 2: ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰."""
+
+    name = "koiter"
+
+    def __init__(self, AC: float, AI: float):
+        self.AC, self.AI = AC, AI
+
+    def launch(self, shell, c: wp.array) -> None:
+        """Fill the shell's reference arrays at every quadrature point from control values c."""
+        s = shell.scalar
+        wp.launch(koiter_reference_kernel, dim=shell.tables.n_quadrature_points,
+                  inputs=[c, *shell.patch_inputs(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.AI)],
+                  outputs=shell.reference_arrays(), device=shell.device)  # fmt: skip
+
+
+class BilayerReference:
+    """The supplement's bilayer: ā = Λ² ā⁰ with Λ² = e^{-AC c}, b̄ = Λ b̄⁰ - A c ā⁰, A = (AC/2 - AI)/R
+    (R: `radius`, the sphere's), so AI > 0 bends a sphere as the Koiter reference does."""
+
+    name = "bilayer"
+
+    def __init__(self, AC: float, AI: float, radius: float):
+        self.AC, self.AI, self.radius = AC, AI, radius
+        self.A = (AC / 2 - AI) / radius
+
+    def launch(self, shell, c: wp.array) -> None:
+        s = shell.scalar
+        wp.launch(bilayer_reference_kernel, dim=shell.tables.n_quadrature_points,
+                  inputs=[c, *shell.patch_inputs(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.A)],
+                  outputs=shell.reference_arrays(), device=shell.device)  # fmt: skip
 
 
 class Shell:
@@ -88,6 +122,8 @@ class Shell:
         if bilayer_radius is None:
             bilayer_radius = math.sqrt(self.rest_area / (4 * math.pi))
         self.bilayer_radius = positive("bilayer_radius", bilayer_radius)
+        self.reference = (KoiterReference(self.AC, self.AI) if model == "koiter" else
+                          BilayerReference(self.AC, self.AI, self.bilayer_radius))  # fmt: skip
         nu = self.poisson
         self._moduli = (
             self.young * self.thickness / (8 * (1 - nu**2)),
@@ -173,20 +209,21 @@ class Shell:
     def _s(self, value) -> object:
         return self.scalar(value)
 
-    def update_reference(self, c: wp.array) -> None:
-        """Active reference ā, ā⁻¹, b̄, dω̄ at every quadrature point from control values c."""
+    def patch_inputs(self) -> list:
+        """The patch tables a quadrature-point kernel gathers through, in the kernels' argument order."""
         t = self.tables
+        return [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle]
+
+    def reference_arrays(self) -> list:
+        """ā, ā⁻¹, b̄ and the reference area weight at every quadrature point."""
+        return [self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight]
+
+    def update_reference(self, c: wp.array) -> None:
+        """Active reference ā, ā⁻¹, b̄, dω̄ at every quadrature point from control values c (`self.reference`:
+        a KoiterReference or a BilayerReference)."""
         self._c_host = None  # the NumPy API's cached c no longer describes the reference
         self.reference_c = c  # the Newton finish's float64 twin copies it (wavewarp/newton.py)
-        wp.launch(
-            active_reference_kernel,
-            dim=t.n_quadrature_points,
-            inputs=[c, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle,
-                    self.rest_metric, self.rest_curvature, MODELS[self.model], self._s(self.AC), self._s(self.AI),
-                    self._s((self.AC / 2 - self.AI) / self.bilayer_radius)],
-            outputs=[self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight],
-            device=self.device,
-        )  # fmt: skip
+        self.reference.launch(self, c)
 
     def _volume_of(self, x: wp.array) -> float:
         self._launch_volume(x, differentiable=False)

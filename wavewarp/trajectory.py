@@ -98,8 +98,9 @@ class TrajectoryWriter:
         if len(f["frames/time"]) == 0:
             raise ValueError(f"cannot resume {self.path!r}: it has no frames")
 
-    def add_frame(self, time: float, **values) -> None:
-        """Append one frame: the time and every series given at construction."""
+    def add_frame(self, time: float, frame: dict) -> None:
+        """Append one frame (the writers' protocol): the time and every series given at construction."""
+        values = frame
         if set(values) != set(self.series):
             raise ValueError(f"a frame needs exactly {sorted(self.series)}, got {sorted(values)}")
         arrays = {name: np.asarray(v, dtype=np.float64) for name, v in values.items()}

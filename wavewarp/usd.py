@@ -84,14 +84,18 @@ class UsdAnimation:
         ground.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
         ground.CreateDisplayColorAttr(Vt.Vec3fArray([Gf.Vec3f(0.6, 0.6, 0.6)]))
 
-    def add_frame(self, points, field=None, time_code: float | None = None) -> None:
-        """Author one frame: control points (V, 3) and the per-vertex field (V,)."""
+    def add_frame(self, time: float, frame: dict) -> None:
+        """Author one frame (the writers' protocol): `frame["positions"]`, control points (V, 3), and
+        `frame[field_name]`, the per-vertex field (V,; zeros when absent). The time code is the frame's
+        index (`fps` per second); `time` is the simulated time."""
         from pxr import Vt
 
-        points = np.asarray(points, dtype=np.float64)
+        del time  # the time code counts frames
+        points = np.asarray(frame["positions"], dtype=np.float64)
+        field = frame.get(self.field_name)
         if not np.all(np.isfinite(points)):
             raise ValueError("refusing to write a frame with non-finite positions")
-        t = float(self.frames if time_code is None else time_code)
+        t = float(self.frames)
         self.points.Set(Vt.Vec3fArray.FromNumpy(points.astype(np.float32)), t)
         self.extent.Set(Vt.Vec3fArray.FromNumpy(np.stack([points.min(0), points.max(0)]).astype(np.float32)), t)
         values = np.zeros(len(points)) if field is None else np.asarray(field, dtype=np.float64)

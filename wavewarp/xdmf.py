@@ -19,14 +19,17 @@ from .io import check_writable
 
 
 class XdmfWriter:
-    """Context manager: `add_frame(time, limit_points, concentration)` per frame."""
+    """Context manager: `add_frame(time, frame)` per frame (the writers' protocol), with
+    `limit_points(x)` and `field_values(c)` turning the frame's control positions and concentrations
+    into the limit surface's points and the field's values there."""
 
-    def __init__(self, path, *, triangles, rest_points):
+    def __init__(self, path, *, triangles, rest_points, limit_points, field_values):
         if os.path.splitext(os.fspath(path))[1] != ".xdmf":
             raise ValueError(f"XDMF output {os.fspath(path)!r} must end in .xdmf")
         self.path = os.path.abspath(os.fspath(path))
         self.triangles = np.asarray(triangles, dtype=np.int64)
         self.rest_points = np.asarray(rest_points, dtype=np.float64)
+        self.limit_points, self.field_values = limit_points, field_values
         self.frames = 0
 
     def __enter__(self) -> XdmfWriter:
@@ -45,9 +48,9 @@ class XdmfWriter:
         self._writer.write_points_cells(self.rest_points, [("triangle", self.triangles)])
         return self
 
-    def add_frame(self, time: float, limit_points, concentration) -> None:
-        limit_points = np.asarray(limit_points, dtype=np.float64)
-        concentration = np.asarray(concentration, dtype=np.float64)
+    def add_frame(self, time: float, frame: dict) -> None:
+        limit_points = np.asarray(self.limit_points(frame["positions"]), dtype=np.float64)
+        concentration = np.asarray(self.field_values(frame["concentration"]), dtype=np.float64)
         if not (np.all(np.isfinite(limit_points)) and np.all(np.isfinite(concentration))):
             raise ValueError("refusing to write a frame with non-finite values")
         self._writer.write_data(float(time), point_data={"concentration": concentration,

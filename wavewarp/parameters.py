@@ -1,0 +1,134 @@
+"""Typed scene parameters and the scene registry.
+
+A scene's parameters are a frozen dataclass whose fields are declared with `param(default, help,
+...)`: the default fixes the type, the help is one line of meaning, and the checks (choices,
+positive, minimum) say what is valid. `resolve(defaults, quick, overrides)` applies a scene's quick
+settings and `--set NAME=VALUE` overrides; an unknown name or a bad value raises `SceneError`
+listing what is valid. A trajectory stores `as_dict(p)`, and `resumed(type, stored)` rebuilds the
+parameters of the run it holds (a parameter newer than the file takes its `legacy` value).
+
+A scene script (`scenes/NAME.py`, installed as `wavewarp.scenes`) defines `NAME`, `DESCRIPTION`,
+`Parameters` (the dataclass), `QUICK` (the `--quick` overrides) and `build(p, *, mesh, device,
+seed, report)`, which returns a run (see wavewarp/driver.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import importlib.util
+import math
+import os
+import pkgutil
+
+from . import scenes
+
+
+class SceneError(ValueError):
+    """A scene name, parameter or value that cannot be used; the message lists what is valid."""
+
+
+def param(default, help: str, *, choices=(), positive: bool = False, minimum=None, legacy=None):
+    """A scene parameter: its default (which fixes its type), one line of help, what values are valid,
+    and `legacy`, the value a trajectory written before the parameter existed ran with."""
+    check = {"help": help, "choices": tuple(choices), "positive": positive, "minimum": minimum, "legacy": legacy}
+    return dataclasses.field(default=default, metadata=check)
+
+
+def fields(kind) -> dict:
+    """name -> dataclasses.Field of a parameters type (or instance)."""
+    return {f.name: f for f in dataclasses.fields(kind)}
+
+
+def parse(field: dataclasses.Field, text):
+    """`text` as the field's type, checked: SceneError naming the parameter and what is valid."""
+    name, kind, check = field.name, type(field.default), field.metadata
+    try:
+        if kind is bool:
+            value = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[str(text).lower()]
+        elif kind is int:
+            value = int(text)
+        elif kind is float:
+            value = float(text)
+            if not math.isfinite(value):
+                raise ValueError
+        else:
+            value = str(text)
+    except (KeyError, ValueError):
+        expected = {bool: "true or false", int: "an integer", float: "a finite number"}.get(kind, "text")
+        raise SceneError(f"bad value for {name}: {text!r} (expected {expected})") from None
+    if check["choices"] and value not in check["choices"]:
+        raise SceneError(f"bad value for {name}: {value!r} (one of {', '.join(map(str, check['choices']))})")
+    if check["positive"] and not value > 0:
+        raise SceneError(f"bad value for {name}: {value!r} (must be > 0)")
+    if check["minimum"] is not None and value < check["minimum"]:
+        raise SceneError(f"bad value for {name}: {value!r} (must be >= {check['minimum']})")
+    return value
+
+
+def resolve(kind, quick: dict | None = None, overrides=()):
+    """Defaults of the parameters type `kind`, then `quick`, then NAME=VALUE `overrides` (SceneError
+    for an unknown name or a bad value)."""
+    known = fields(kind)
+    values = dict(quick or {})
+    for item in overrides:
+        name, sep, text = str(item).partition("=")
+        name = name.strip()
+        if not sep:
+            raise SceneError(f"--set needs NAME=VALUE, got {item!r}")
+        if name not in known:
+            raise SceneError(f"unknown parameter {name!r}; valid: {', '.join(sorted(known))}")
+        values[name] = parse(known[name], text.strip())
+    return kind(**values)
+
+
+def resumed(kind, stored: dict):
+    """The parameters a stored trajectory ran with: its values for the fields it has; for newer fields,
+    the value such files ran with (`legacy`), else the default. Stored keys that are no parameters
+    (derived values) are left out."""
+    values = {name: f.metadata["legacy"] for name, f in fields(kind).items() if f.metadata.get("legacy") is not None}
+    values.update({name: value for name, value in stored.items() if name in fields(kind)})
+    return kind(**values)
+
+
+def as_dict(p) -> dict:
+    """The parameters as a plain dict (JSON for trajectories and `--json`)."""
+    return dataclasses.asdict(p)
+
+
+def help_lines(kind) -> list:
+    """One line per parameter: name, default and help (for `wavewarp run SCENE --help`)."""
+    return [f"{name} = {f.default!r}: {f.metadata['help']}" for name, f in fields(kind).items()]
+
+
+# ---------------------------------------------------------------- the scene registry
+
+
+def scene_descriptions() -> dict[str, str]:
+    """Scene name -> one-line description, from the modules of `wavewarp.scenes`."""
+    found = {}
+    for info in pkgutil.iter_modules(scenes.__path__):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"wavewarp.scenes.{info.name}")
+        found[getattr(module, "NAME", info.name.replace("_", "-"))] = getattr(module, "DESCRIPTION", "")
+    return dict(sorted(found.items()))
+
+
+def load_scene(name_or_path: str):
+    """The scene module: a name from `wavewarp.scenes` or the path of a scene script."""
+    if name_or_path.endswith(".py") or os.sep in name_or_path:
+        if not os.path.isfile(name_or_path):
+            raise SceneError(f"scene script {name_or_path!r} does not exist")
+        spec = importlib.util.spec_from_file_location("wavewarp_user_scene", name_or_path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    else:
+        known = scene_descriptions()
+        if name_or_path not in known:
+            raise SceneError(f"unknown scene {name_or_path!r}; valid: {', '.join(known)}")
+        module = importlib.import_module(f"wavewarp.scenes.{name_or_path.replace('-', '_')}")
+    for attribute in ("NAME", "Parameters", "build"):
+        if not hasattr(module, attribute):
+            raise SceneError(f"scene {name_or_path!r} defines no {attribute}")
+    return module
