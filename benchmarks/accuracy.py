@@ -1,4 +1,4 @@
-"""Accuracy-against-cost benchmark (issue 7): SPEC §8's known answers over the settings a scene chooses.
+"""Accuracy against cost: the known answers (docs/theory/scenes.md#checks) over the settings a scene chooses.
 
     wavewarp bench accuracy --device cpu --out benchmarks/results [--quick] [--cases ...]
 
@@ -10,7 +10,7 @@ against the exact answer):
   Loop subdivision or P1) over level, quadrature rule and dtype: a host float64 eigensolve of the K
   and M that dtype built. Cost: one pole-to-pole crossing (t = πR/γ) of the telegraph leapfrog with
   that operator at 0.9 × its bound (operator build, stability guard, steps).
-* `telegraph`: c(t) against the Legendre series of c_tt + α c_t = γ² Δc on a sphere (SPEC §8) over
+* `telegraph`: c(t) against the Legendre series of c_tt + α c_t = γ² Δc on a sphere (docs/theory/scenes.md) over
   level, dt (fractions of the stability bound), dtype, discretisation and mass corrections.
   "modes": c0 = Σ P_l(cos θ), l = 1..6, with an initial velocity (unit sphere, γ = 1, α = 0.1,
   t = π); "pulse": the starfish's and buckling's outgoing Gaussian (R = 10, width √2, γ = 1,
@@ -18,7 +18,7 @@ against the exact answer):
   Error: max over the nodes of |c − c_exact| over max |c_exact| (modes) or the pulse's peak C0 = 1.
   Cost: build, initial data, guard and steps.
 * `radius`: a sphere under uniform c = 1 relaxed by `Shell.relax` against the minimiser λ of the
-  closed-form energy E(r = λR) (SPEC §8), for each scene family's AC, AI, h/R, μV and model, over
+  closed-form energy E(r = λR) (docs/theory/scenes.md), for each scene family's AC, AI, h/R, μV and model, over
   level, quadrature rule, dtype and relaxation tolerance (× the dtype's default). Error:
   |r̄/R − λ| / |1 − λ|, r̄ the mean radius of the limit points. Cost: Shell build and relax.
 * `arrival`: an outgoing Gaussian's front reaches geodesic distance s at s/γ + t0. "sphere": the
@@ -30,7 +30,7 @@ against the exact answer):
   field values sampled every 0.1 width/γ); error |v/γ − 1| for the speed v fitted to it. Cost: build, guard and steps (not the sampling).
 * `front`: the FitzHugh–Nagumo front on the sphere walker's rest sphere (R = 25, its kinetics, dt and
   Gaussian start) against the continuum front speed of a 1-D lattice solve converged in h and dt
-  (SPEC §8 "FHN"; the bistable speed √(2γ²)(½ − ν) of w ≡ 0 beside it), over level, dtype and mass
+  (docs/theory/scenes.md; the bistable speed √(2γ²)(½ − ν) of w ≡ 0 beside it), over level, dtype and mass
   corrections. Coarse lattices pin the front (propagation failure): a front that does not cross the
   probes' window counts as speed 0, error 1. Error |v − v_ref| / v_ref for v fitted to the arrival
   times of c = 0.5 at geodesic distances θ ∈ [π/4, 3π/4] from the origin. Cost: build, guard, steps.
@@ -112,7 +112,7 @@ def equivalent_level(mesh, radius) -> int:
     """The finest icosphere level whose mean control edge, in units of its radius, is no shorter than
     the mesh's in units of `radius`: the lumped operator's error on the modes λR² ≤ 42 (l ≤ 6 on the
     sphere) goes with that edge, not with the vertex count, and so do the FHN front's pinning and
-    speed, set by γ²/h² (BENCHMARKS.md "Accuracy")."""
+    speed, set by γ²/h² (BENCHMARKS.md#accuracy-against-cost)."""
     edge, level = mean_edge(mesh) / radius, 0
     while icosphere_edge(level + 1) >= edge:
         level += 1

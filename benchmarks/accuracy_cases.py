@@ -27,15 +27,16 @@ from wavewarp.waves import FitzHughNagumo, Telegraph
 CASES = ("spectrum", "telegraph", "radius", "arrival", "front")
 METHODS = (("subdivision", 0), ("subdivision", 2), ("p1", 0))  # (discretization, mass corrections)
 EXACT = np.concatenate([[l * (l + 1)] * (2 * l + 1) for l in range(7)])
-WIDTH = math.sqrt(2.0)  # the scenes' pulse width in length units (SPEC §5: σ² = 2/R²)
-# the pulse width by configuration: the ascidian's own (R/2: its shell stays axisymmetric, docs/scenes.md)
-PULSE_WIDTHS = {"pulse": WIDTH, "wide pulse": resolve(load_scene("ascidian").Parameters).width}
+WIDTH = math.sqrt(2.0)  # the scenes' pulse width in length units (docs/theory/chemistry.md: σ² = 2/R²)
+# the pulse width by configuration: the oocytes' (the paper's σ² = 2/R²) and a pulse R/2 wide, a wave that spans
+# a quarter of the sphere (what a wide initial condition asks of the mesh)
+PULSE_WIDTHS = {"pulse": WIDTH, "wide pulse": 5.0}
 OOCYTE_RADIUS, BOX_EDGE = 10.0, 20.0  # the oocyte and wave-guide scenes' R and L
-SCENE_DT = 0.4  # the telegraph scenes' dt = 0: 0.4 × the rest surface's bound (wavewarp/scene.py)
+SCENE_DT = 0.4  # the telegraph scenes' dt = 0: 0.4 × the rest surface's bound (wavewarp/quasistatic.py)
 RELAX_ITERATIONS = 2000  # converged relaxations here take ≤ 171; a float32 tolerance below round-off spends it all
 MODES_C = np.array([0.0, 1, 1, 1, 1, 1, 1])  # "modes": c0 = Σ a_l P_l, c_t(0) = Σ b_l P_l
 MODES_V = np.array([0.2, 0.5, -0.5, 0.5, -0.5, 0.5, -0.5])
-FAMILIES = {  # uniform-c spheres (SPEC §6): AC, AI, h/R, μV in Y h / R⁴, model
+FAMILIES = {  # uniform-c spheres (docs/theory/scenes.md): AC, AI, h/R, μV in Y h / R⁴, model
     "ascidian": (1.5, 1.6, 0.05, 24.0, "koiter"),
     "starfish": (0.5, 0.5, 0.05, 24.0, "koiter"),
     "buckling": (0.0, 11.0, 0.05, 0.0, "koiter"),
@@ -45,7 +46,7 @@ FAMILIES = {  # uniform-c spheres (SPEC §6): AC, AI, h/R, μV in Y h / R⁴, mo
     "bilayer-walker": (0.1, 0.0, 0.084, 0.4, "bilayer"),
 }
 NEEDS = {  # scene: the (case, configuration) pairs that bound its accuracy
-    "ascidian": (("telegraph", "wide pulse"), ("radius", "ascidian")),
+    "ascidian": (("arrival", "sphere"), ("telegraph", "pulse"), ("radius", "ascidian")),
     "starfish": (("arrival", "sphere"), ("telegraph", "pulse"), ("radius", "starfish")),
     "buckling": (("arrival", "sphere"), ("telegraph", "pulse"), ("radius", "buckling")),
     "buckling-modes": (("arrival", "sphere"), ("radius", "buckling")),
@@ -58,13 +59,13 @@ NEEDS = {  # scene: the (case, configuration) pairs that bound its accuracy
 }
 TOLERANCES = {
     "arrival": (1e-2, "front speed to 1%: the oocytes' kymograph claim is a constant speed (measured 1.012 γ, "
-                "nonlinearity 0.5%), the wave guides' the eikonal circles s = γt (docs/scenes.md)"),
+                "nonlinearity 0.5%), the wave guides' the eikonal circles s = γt (docs/theory/scenes.md)"),
     "telegraph": (2e-2, "c drives the active strain AC·c: 2% of the pulse's peak is 2% of the local contraction"),
     "radius": (1e-3, "the closed-form checks' bar (tests/test_shell.py, test_coupled.py, test_scenes.py): "
                "1e-3 of the contraction |1 − λ|"),
     "spectrum": (1e-1, "FHN diffusion of the large-scale modes (l ≤ 6) to 10%: the pulse speed goes as "
                  "√(γ²λ), 5%"),
-    "front": (2e-1, "the walkers move with the travelling contraction (SPEC §6, Fig. 3a), so the FHN front must "
+    "front": (2e-1, "the walkers move with the travelling contraction (docs/theory/scenes.md, Fig. 3a), so the FHN front must "
               "travel: coarse lattices pin it (error 1); its speed v sets the contraction's wavelength vT, here "
               "to 20%, what level 4 with two mass corrections or lumped level 5 meets: 10% needs level 5 with "
               "two corrections (lumped: level 7), 4× the mechanics; the walker's dt = 0.5 alone slows the front "
@@ -129,7 +130,7 @@ def legendre_coefficients(profile, lmax) -> np.ndarray:
 
 def telegraph_modes(a, b, gamma, alpha, radius, t) -> np.ndarray:
     """Legendre coefficients at time t of c_tt + α c_t = γ² Δc (α > 0) on a sphere of radius R from
-    c = Σ a_l P_l, c_t = Σ b_l P_l (SPEC §8): c_0 = a_0 + b_0 (1 − e^{−αt})/α (overdamped); for
+    c = Σ a_l P_l, c_t = Σ b_l P_l (docs/theory/scenes.md): c_0 = a_0 + b_0 (1 − e^{−αt})/α (overdamped); for
     l ≥ 1, ω_l² = γ² l(l+1)/R² − α²/4 and c_l = e^{−αt/2} [a_l cos ω_l t + (b_l + α a_l/2)/ω_l sin ω_l t]."""
     l = np.arange(len(a))
     omega = np.sqrt(gamma**2 * l * (l + 1) / radius**2 - alpha**2 / 4, where=l > 0, out=np.ones(len(a)))
@@ -139,12 +140,12 @@ def telegraph_modes(a, b, gamma, alpha, radius, t) -> np.ndarray:
 
 
 def closed_form_stretch(AC, AI, h, mu_v, model, nu=0.33, c=1.0) -> float:
-    """λ = r/R minimising the energy of a sphere of radius r = λR under uniform c (SPEC §8), Y = R = 1:
+    """λ = r/R minimising the energy of a sphere of radius r = λR under uniform c (docs/theory/scenes.md), Y = R = 1:
 
         E(λ) = π h/(1−ν) [(λ² − s)²/s + (h²/3)(λ − k)²/s] + μV h (4π/3 (λ³ − 1))²,   s = e^{−AC c},
 
-    (ā = s ā⁰, a = λ² ā⁰, b = λ b̄⁰, b̄ = k b̄⁰ inserted in SPEC §3), k = 1 − AI c (Koiter) or
-    e^{−AC c/2} + (AC/2 − AI) c (bilayer: b̄ = Λ b̄⁰ − A c ā⁰, A = (AC/2 − AI)/R, docs/shell.md).
+    (ā = s ā⁰, a = λ² ā⁰, b = λ b̄⁰, b̄ = k b̄⁰ inserted in the Koiter energy, docs/theory/shell.md), k = 1 − AI c (Koiter) or
+    e^{−AC c/2} + (AC/2 − AI) c (bilayer: b̄ = Λ b̄⁰ − A c ā⁰, A = (AC/2 − AI)/R, docs/theory/shell.md).
     A grid finds the global minimum; a root-finder on E'(λ) pins it to round-off."""
     s = math.exp(-AC * c)
     k = 1 - AI * c if model == "koiter" else math.exp(-AC * c / 2) + (AC / 2 - AI) * c
@@ -338,7 +339,7 @@ def arrival_point(device, configuration, size, rule, discretization, corrections
 
 @functools.lru_cache(maxsize=None)
 def walker_chemistry() -> dict:
-    """The sphere walker's R and FHN parameters, dt included (SPEC §5, §6; scenes/sphere_walker.py)."""
+    """The sphere walker's R and FHN parameters, dt included (docs/theory/chemistry.md, docs/theory/scenes.md; scenes/sphere_walker.py)."""
     p = vars(resolve(load_scene("sphere-walker").Parameters))
     return {name: p[name] for name in ("radius", "gamma", "nu", "kappa", "epsilon", "dt")}
 
@@ -370,7 +371,7 @@ FRONT_SPACINGS = (0.2, 0.1, 0.05)  # 1-D reference lattices: h ≤ 0.1 mean edge
 
 @functools.lru_cache(maxsize=None)
 def front_reference(epsilon=None) -> dict:
-    """The continuum front speed (SPEC §8 "FHN"): the 1-D lattice at FRONT_SPACINGS (dt ∝ h²),
+    """The continuum front speed (docs/theory/scenes.md): the 1-D lattice at FRONT_SPACINGS (dt ∝ h²),
     Richardson-extrapolated; second order is checked (successive differences fall 3.5–4.5×). Beside
     it the bistable speed √(2γ²)(½ − ν) of the front without w. `epsilon` overrides the walker's ε
     (0: w ≡ 0, where the two must agree)."""

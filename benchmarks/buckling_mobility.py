@@ -1,4 +1,4 @@
-"""Buckling with lagging mechanics (issue 5 probe, docs/scenes.md): the `buckling` scene's shell and
+"""Buckling with lagging mechanics (issue 5 probe, docs/theory/scenes.md): the `buckling` scene's shell and
 wave, stepped by the overdamped mobility model (`OverdampedDynamics`, no ground or gravity) instead
 of quasi-static relaxations, to see whether a shell that lags its reference buckles into the n-fold
 sequence of the paper's Fig. S1a.

@@ -1,6 +1,6 @@
 """Stability of the buckling scene's quasi-static path: does it lose stability to an n-fold mode?
 
-Issue 5, docs/scenes.md: the shell under the paper's Gaussian wave (AI = 11, R/h = 20, supplement
+Issue 5, docs/theory/scenes.md: the shell under the paper's Gaussian wave (AI = 11, R/h = 20, supplement
 Fig. S1a).
 
     wavewarp bench buckling_stability --device cpu --level 4 --out DIR

@@ -5,7 +5,7 @@
 Throughput: telegraph leapfrog steps per second (γ = R = 1, dt = 0.9 × the stability bound)
 on level-L icospheres, for the subdivision operator with lumped mass (p = 0), with two mass
 corrections (p = 2), and for P1; float32 and float64; assembled K (default) and, in float32,
-matrix-free K. FitzHugh–Nagumo (SPEC ν, κ, ε, γ = 1),
+matrix-free K. FitzHugh–Nagumo (the paper's ν, κ, ε, γ = 1),
 float32: explicit Euler at 0.9 × its bound, IMEX at dt = 0.05 (CG to 1e-5). Each figure is the median of 3 timed runs
 after a warm-up (graph capture), each run long enough to take `--min-seconds`; the device is
 synchronised by the blow-up check at the end of every `advance`.
@@ -61,7 +61,7 @@ def sphere(level):
 
 
 def make_wave(wave, op, c0, v0, corrections):
-    """The stepper of one throughput row (γ = R = 1; FHN with the SPEC's ν, κ, ε)."""
+    """The stepper of one throughput row (γ = R = 1; FHN with the paper's ν, κ, ε)."""
     if wave == "telegraph":
         return Telegraph(op, 1.0, 0.001, c0=c0, v0=v0, mass_corrections=corrections, check_every=20)
     if wave == "fhn-explicit":

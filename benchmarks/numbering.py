@@ -1,4 +1,4 @@
-"""Numbering benchmark (issue 7; docs/geometry.md "Numbering"): the Koiter force kernel in old and new mesh numberings.
+"""Numbering benchmark (issue 7; docs/theory/geometry.md#numbering-for-memory-locality): the Koiter force kernel in old and new mesh numberings.
 
     wavewarp bench numbering --device cuda:0 --levels 6 7 8 --out benchmarks/results
 

@@ -1,4 +1,4 @@
-"""The vectorised NumPy implementation of the Koiter energy and its gradient (SPEC §3).
+"""The vectorised NumPy implementation of the Koiter energy and its gradient (docs/theory/shell.md).
 
 The baseline a researcher would write: identical discretisation (same patch tables, same
 quadrature, same active reference and volume term), computed with NumPy array operations,

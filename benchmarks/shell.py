@@ -7,7 +7,7 @@ reference fixed), median over batches after a warm-up, device synchronised aroun
 The NumPy baseline (benchmarks/numpy_shell.py, float64) computes the identical energy and
 gradient in the same run; the printed ratio is Warp / NumPy. Relax: wall time for
 `Shell.relax` to reach its default tolerance after a uniform step c = 0 -> 1 on a level-4
-icosphere (ascidian parameters, SPEC §6). Writes `shell_<device>.json`.
+icosphere (ascidian parameters, docs/theory/scenes.md). Writes `shell_<device>.json`.
 """
 
 from __future__ import annotations

@@ -90,7 +90,7 @@ def walker_shell(level: int, device, dtype, deterministic=False, volume=True):
 
 
 def walker_ground() -> Ground:
-    """The walkers' default ground (SPEC §4, per limit point)."""
+    """The walkers' default ground (docs/theory/dynamics.md, per limit point)."""
     return Ground(stiffness=WALKER["stiffness"], damping=WALKER["contact_damping"], friction=WALKER["friction"],
                   sharpness=WALKER["sharpness"])  # fmt: skip
 

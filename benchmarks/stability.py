@@ -1,4 +1,4 @@
-"""Stability benchmark (issue 7, SPEC §8 "Stability"): largest stable time steps against their bounds.
+"""Stability benchmark (issue 7, docs/theory/scenes.md): largest stable time steps against their bounds.
 
 The largest stable time step of every explicit method against mesh size and thickness, against
 the method's predicted bound.
@@ -20,8 +20,8 @@ is reported beside it with the criterion that fired (`unstable_by`).
   P1): bound 2 / (γ sqrt(λ_max(M̃⁻¹K))); c0 random in [0, 1e-3], v0 = 0; watched c, growth 1000;
   2000 steps. Below the bound every mode keeps its amplitude; past it by ε = dt/dt* - 1 the top
   mode grows by 1 + 2 sqrt(2ε) per step, so 2000 steps see ε ≳ 1e-5.
-* FitzHugh–Nagumo explicit Euler, γ = 1, SPEC ν, κ: bound 2 / (γ² λ_max + L_f); 5000 steps (Euler's
-  top mode grows by 1 + 2ε per step). "rest": c0 random in [0, 1e-3], SPEC ε, growth 1000 (the
+* FitzHugh–Nagumo explicit Euler, γ = 1, the paper's ν, κ: bound 2 / (γ² λ_max + L_f); 5000 steps (Euler's
+  top mode grows by 1 + 2ε per step). "rest": c0 random in [0, 1e-3], the paper's ε, growth 1000 (the
   medium's own oscillatory instability grows at ~0.005 per time unit); there f'(0) = -ν, so the
   true limit is 2 / (γ² λ_max + ν) and the bound is conservative by (γ² λ_max + L_f) / (γ² λ_max + ν).
   "excited": c0 = 1 + the same noise, ε = 0 so the state stays at the kinetic fixed point c = 1,
@@ -78,10 +78,10 @@ STEPS = {"telegraph": 2000, "fhn-explicit": 5000, "fhn-imex": 2000, "dynamics": 
 GROWTH = {"default": 1e3, "attracting": 2.0}  # unstable: the deviation's max norm passes this × its initial one
 CHUNK = 100  # steps between two looks at the state (and the steppers' own blow-up checks)
 GAMMA, ALPHA = 1.0, 0.001  # unit sphere: the chemistry benchmark's setting
-NU, KAPPA, EPSILON = -0.01, 1e-4, 0.005  # SPEC §5
+NU, KAPPA, EPSILON = -0.01, 1e-4, 0.005  # docs/theory/chemistry.md
 TELEGRAPH = (("subdivision", 0), ("subdivision", 2), ("p1", 0))  # (discretization, mass corrections)
 YOUNG = 1.0
-RELAX_COUPLING = {"AC": 0.5, "AI": 0.5}  # starfish oocyte (SPEC §6); μV = 24 Y h / R⁴
+RELAX_COUPLING = {"AC": 0.5, "AI": 0.5}  # starfish oocyte (docs/theory/scenes.md); μV = 24 Y h / R⁴
 PARTS = ("telegraph", "fhn", "dynamics", "relax")
 
 
@@ -190,7 +190,7 @@ def telegraph_row(level, discretization, corrections, dtype, device, resolution)
 
 
 def fhn_row(level, state, scheme, dtype, device, resolution) -> dict:
-    """FHN on the unit sphere: state "rest" (c ≈ 0, SPEC ε) or "excited" (c ≈ 1, ε = 0)."""
+    """FHN on the unit sphere: state "rest" (c ≈ 0, the paper's ε) or "excited" (c ≈ 1, ε = 0)."""
     op = operator(level, "subdivision", dtype, device)
     base = 0.0 if state == "rest" else 1.0
     c0 = base + noise(op.n_vertices)

@@ -1,4 +1,4 @@
-"""External forces on the walkers (SPEC §4), one kernel per term.
+"""External forces on the walkers (docs/theory/dynamics.md), one kernel per term.
 
 Gravity acts on the control points (exact: ∂/∂x_I of ρ g ∫ z dω̄⁰ is M_I g). Contact and
 friction act on the limit points p = L x with velocities u = L v (L the Loop limit mask) and
@@ -19,7 +19,7 @@ from .limit_surface import basis_row, patch_scalar
 
 @wp.kernel
 def gravity_kernel(mass: wp.array(dtype=Any), g: Any, forces: wp.array(dtype=Any)):
-    """forces_I += -M_I g ẑ (SPEC §4)."""
+    """forces_I += -M_I g ẑ (docs/theory/dynamics.md)."""
     i = wp.tid()
     f = forces[i]
     f[2] = f[2] - mass[i] * g
@@ -31,7 +31,7 @@ def ground_contact_kernel(
     p: wp.array(dtype=Any), u: wp.array(dtype=Any), k: Any, beta: Any,
     normal_force: wp.array(dtype=Any), limit_forces: wp.array(dtype=Any),
 ):  # fmt: skip
-    """Ground z = 0: F_n = max(k z² - β u_z, 0) ẑ where z ≤ 0 (SPEC §4; the max drops adhesion)."""
+    """Ground z = 0: F_n = max(k z² - β u_z, 0) ẑ where z ≤ 0 (docs/theory/dynamics.md; the max drops adhesion)."""
     i = wp.tid()
     z = p[i][2]
     zero = type(z)(0.0)
@@ -46,7 +46,7 @@ def ground_contact_kernel(
 def friction_kernel(
     u: wp.array(dtype=Any), normal_force: wp.array(dtype=Any), mu: Any, k_f: Any, limit_forces: wp.array(dtype=Any)
 ):  # fmt: skip
-    """F_f = -μ |F_n| tanh(k_f |v_t|) v_t / |v_t|, v_t the velocity tangential to the ground (SPEC §4)."""
+    """F_f = -μ |F_n| tanh(k_f |v_t|) v_t / |v_t|, v_t the velocity tangential to the ground (docs/theory/dynamics.md)."""
     i = wp.tid()
     fn = normal_force[i]
     zero = type(fn)(0.0)

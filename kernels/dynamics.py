@@ -1,4 +1,4 @@
-"""Shell dynamics of the walkers (SPEC §3 "Walker scenes"): symplectic Euler with lumped mass, or the
+"""Shell dynamics of the walkers (docs/theory/dynamics.md): symplectic Euler with lumped mass, or the
 overdamped mobility model (explicit Euler on M ζ v = F)."""
 
 from typing import Any

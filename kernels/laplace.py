@@ -1,4 +1,4 @@
-"""Laplace–Beltrami mass and stiffness (SPEC §5, §9): Galerkin on the Loop basis, and P1.
+"""Laplace–Beltrami mass and stiffness (docs/theory/chemistry.md, docs/theory/scenes.md): Galerkin on the Loop basis, and P1.
 
 Subdivision (one thread per quadrature point q of triangle t, patch vertices k):
 
@@ -6,7 +6,7 @@ Subdivision (one thread per quadrature point q of triangle t, patch vertices k):
     (K c)_I = Σ_q N_I,α D^{αβ} c,β           D = a^{-1} j w_q = adj(a) w_q / max(j, j_floor)
 
 j_floor (a hundredth of the rest j) only acts where the limit surface is singular: a fold sharper
-than the mesh, where the tangents turn parallel and D would grow as 1/j (docs/chemistry.md).
+than the mesh, where the tangents turn parallel and D would grow as 1/j (docs/theory/chemistry.md).
 
 `surface_metric_kernel` computes D and M whenever the positions change; `stiffness_kernel`
 then only gathers c,β over the patch and scatters N_I,α D^{αβ} c,β with atomics.
@@ -21,7 +21,7 @@ edge) and scatters a third of the area to each corner; `p1_stiffness_kernel` sca
 w (c_i - c_j) along the three edges.
 
 The consistent mass actions (`∫ N_I N_J dω c_J`) serve the mass-corrected steppers
-(docs/chemistry.md); the vector kernels below serve power iteration and conjugate gradients.
+(docs/theory/chemistry.md); the vector kernels below serve power iteration and conjugate gradients.
 
 Generic over float32/float64 (`Any`); typed constants as `type(v)(...)`.
 """

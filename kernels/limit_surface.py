@@ -1,4 +1,4 @@
-"""Limit-surface evaluation at quadrature points (SPEC §2): gather and sum, no per-step tables.
+"""Limit-surface evaluation at quadrature points (docs/theory/geometry.md): gather and sum, no per-step tables.
 
 Generic over float32/float64 (`Any`). Symmetric 2x2 tensors (metric, curvature) are `mat22`.
 Quadrature point q lies on triangle t = q // P and reads basis row `type[t] * P + q % P`.
@@ -71,7 +71,7 @@ def second_form(n: Any, x11: Any, x12: Any, x22: Any):
 
 @wp.func
 def mean_curvature(a: Any, b: Any):
-    """H = -½ a^{αβ} b_αβ: +1/R on a sphere with outward normals (SPEC §9 sign)."""
+    """H = -½ a^{αβ} b_αβ: +1/R on a sphere with outward normals (docs/theory/scenes.md sign)."""
     trace = wp.trace(wp.inverse(a) * b)
     return -trace * type(trace)(0.5)
 
@@ -128,7 +128,7 @@ def limit_positions_kernel(
     ring_weight: wp.array(dtype=Any),
     limit: wp.array(dtype=Any),
 ):
-    """Loop's limit mask: (1 - Nχ) x_i + χ Σ_ring x_j (SPEC §8)."""
+    """Loop's limit mask: (1 - Nχ) x_i + χ Σ_ring x_j (docs/theory/scenes.md)."""
     i = wp.tid()
     s = x[i] * centre_weight[i]
     for k in range(ring_start[i], ring_start[i + 1]):
@@ -147,7 +147,7 @@ def limit_motion_kernel(
     p: wp.array(dtype=Any),
     u: wp.array(dtype=Any),
 ):
-    """Limit points p = L x and their velocities u = L v in one pass over the rings (SPEC §4, §8)."""
+    """Limit points p = L x and their velocities u = L v in one pass over the rings (docs/theory/dynamics.md, docs/theory/scenes.md)."""
     i = wp.tid()
     sx = x[i] * centre_weight[i]
     sv = v[i] * centre_weight[i]
@@ -168,7 +168,7 @@ def patch_scalar(
     t: int,
     row: int,
 ):
-    """Σ N_k c_k of triangle t's patch at basis row `row`: a field on the surface (SPEC §2), or with
+    """Σ N_k c_k of triangle t's patch at basis row `row`: a field on the surface (docs/theory/geometry.md), or with
     vec3 values the surface's points alone."""
     start = patch_start[t]
     value = basis[row, 0][0] * c[patch_vertices[start]]

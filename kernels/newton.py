@@ -1,4 +1,4 @@
-"""Kernels of the sparse Hessian by coloured central differences (docs/shell.md, "Newton finish").
+"""Kernels of the sparse Hessian by coloured central differences (docs/theory/shell.md#newton-finish).
 
 Vertices of one colour share no force row (no triangle patch holds two of them and a third
 vertex's patch neighbourhood meets at most one), so one pair of force evaluations per colour and

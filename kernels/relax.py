@@ -1,4 +1,4 @@
-"""Kernels of the device-resident nonlinear conjugate-gradient relaxation (docs/shell.md).
+"""Kernels of the device-resident nonlinear conjugate-gradient relaxation (docs/theory/shell.md).
 
 One loop pass evaluates one trial point x + α d; `line_search_kernel` decides from it (accept,
 or a new step length), and the CG update runs only after an accepted step (`flags[ACCEPTED]`).
@@ -93,7 +93,7 @@ def slope_kernel(forces: wp.array(dtype=Any), direction: wp.array(dtype=Any), do
 def line_search_kernel(trial_energy: wp.array(dtype=wp.float64), dot: wp.array(dtype=Any),
                        search: wp.array(dtype=wp.float64), flags: wp.array(dtype=wp.int32),
                        condition: wp.array(dtype=wp.int32)):  # fmt: skip
-    """Decide on the trial point (docs/shell.md "Relaxation").
+    """Decide on the trial point (docs/theory/shell.md#relaxation).
 
     The probe at the previous step length gives a secant estimate of dE/dα = 0 (at most 4×); then
     backtracking by halves. Accept under Armijo's condition, or, where the energy change is below

@@ -1,5 +1,5 @@
-"""Self-contact of a shell (ours; SPEC has none): parts far apart on the rest surface repel once
-they come within the contact distance d in space (docs/shell.md "Self-contact").
+"""Self-contact of a shell (ours; the paper has none): parts far apart on the rest surface repel once
+they come within the contact distance d in space (docs/theory/shell.md#self-contact).
 
 A double integral over the limit surface at its quadrature points q, with rest areas w_q = dω̄⁰_q:
 

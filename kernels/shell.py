@@ -128,7 +128,7 @@ def koiter_jet(
 
 @wp.func
 def koiter_density(membrane: Any, bending: Any, stretching_modulus: Any, bending_modulus: Any, nu: Any):
-    """Stretching plus bending energy per reference area (SPEC §3)."""
+    """Stretching plus bending energy per reference area (docs/theory/shell.md)."""
     return stretching_modulus * material_energy(membrane, nu) + bending_modulus * material_energy(bending, nu)
 
 
@@ -149,7 +149,7 @@ def koiter_energy_kernel(
     nu: Any,
     energy_density: wp.array(dtype=wp.float64),
 ):
-    """(E_S + E_B) density × dω̄ at every point (SPEC §3), in float64; differentiable (autodiff path)."""
+    """(E_S + E_B) density × dω̄ at every point (docs/theory/shell.md), in float64; differentiable (autodiff path)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
     membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
@@ -164,7 +164,7 @@ def koiter_gradient_jet(
     membrane: Any, bending: Any, inv: Any, w: Any, stretching_modulus: Any, bending_modulus: Any, nu: Any,
     x1: Any, x2: Any, x11: Any, x12: Any, x22: Any, n: Any, j: Any,
 ):  # fmt: skip
-    """∂(E_S + E_B)/∂(x,1, x,2, x,11, x,12, x,22) at one point (hand-derived, docs/shell.md)."""
+    """∂(E_S + E_B)/∂(x,1, x,2, x,11, x,12, x,22) at one point (hand-derived, docs/theory/shell.md)."""
     # ∂W/∂a_αβ = S, ∂W/∂b_αβ = B (symmetric)
     S = (stretching_modulus * w) * material_stress(membrane, inv, nu)
     B = (bending_modulus * w) * material_stress(bending, inv, nu)
@@ -279,7 +279,7 @@ def moments_normal_sum(moments: wp.array(dtype=VolumeMoments)):
 
 @wp.func
 def volume_about_centroid(moments: wp.array(dtype=VolumeMoments), n_vertices: int):
-    """V = ⅓ ∫ (x - x̄)·n dω = V₀ - x̄·S: exactly translation invariant (docs/shell.md)."""
+    """V = ⅓ ∫ (x - x̄)·n dω = V₀ - x̄·S: exactly translation invariant (docs/theory/shell.md)."""
     return moments[0][3] - wp.dot(moments_centroid(moments, n_vertices), moments_normal_sum(moments))
 
 
@@ -298,7 +298,7 @@ def volume_kernel(
 ):
     """Item i's share of the volume moments [S, V₀, Σx] (float64; launched over max(points,
     vertices)): quadrature point i's terms of S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω, and control point
-    i's of Σx (SPEC §3); then V = V₀ - x̄·S about the control centroid (`volume_about_centroid`).
+    i's of Σx (docs/theory/shell.md); then V = V₀ - x̄·S about the control centroid (`volume_about_centroid`).
     Written to `terms`, for a fixed-order or differentiable sum; or, with `reduce`, added to
     moments[0] (zeroed by the caller; launched on whole blocks, one atomic per block)."""
     i = wp.tid()

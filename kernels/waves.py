@@ -1,11 +1,11 @@
-"""Time-step kernels of the chemical waves (SPEC §5): one per physical term, per vertex.
+"""Time-step kernels of the chemical waves (docs/theory/chemistry.md): one per physical term, per vertex.
 
 Telegraph `c_tt + α c_t = γ² Δ c` (leapfrog with centred damping), FitzHugh–Nagumo
 `c_t = γ² Δ c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (explicit Euler, and IMEX Euler whose
 implicit diffusion is solved by the Jacobi-preconditioned conjugate gradients below).
 Here `acceleration` is the diffusion term's `M̃⁻¹ K c` (wavewarp/waves.py builds it), so the
 kernels below see only per-vertex numbers. One int32 flag per stepper, read once per chunk
-(SPEC §8), says what failed: RUNAWAY (NaN/Inf or past the limit) or FLIP_FLOP (FHN's bounded
+(docs/theory/scenes.md), says what failed: RUNAWAY (NaN/Inf or past the limit) or FLIP_FLOP (FHN's bounded
 period-2 oscillation past its time-step bound). Reductions sum interleaved strides per thread and
 add the partial sums atomically: no tile kernels, no host round-trips, graph-capturable.
 """
@@ -24,7 +24,7 @@ FLIP_FLOP = wp.constant(2)
 def telegraph_kernel(acceleration: wp.array(dtype=Any), gamma2: Any, damping: Any, dt: Any, c: wp.array(dtype=Any), v: wp.array(dtype=Any)):
     """v^{n+½} = [(1 - αdt/2) v^{n-½} - dt γ² M̃⁻¹Kc^n] / (1 + αdt/2);  c^{n+1} = c^n + dt v^{n+½}.
 
-    `damping` is αdt/2. Stable while dt < 2 / (γ sqrt(λ_max(M̃⁻¹K))) (docs/chemistry.md).
+    `damping` is αdt/2. Stable while dt < 2 / (γ sqrt(λ_max(M̃⁻¹K))) (docs/theory/chemistry.md).
     """
     i = wp.tid()
     one = type(dt)(1.0)
@@ -44,7 +44,7 @@ def telegraph_recentre_kernel(acceleration: wp.array(dtype=Any), gamma2: Any, al
 
 @wp.func
 def fhn_reaction(c: Any, nu: Any):
-    """c (1 - c)(c - ν) (SPEC §5, evaluated on control values)."""
+    """c (1 - c)(c - ν) (docs/theory/chemistry.md, evaluated on control values)."""
     return c * (type(c)(1.0) - c) * (c - nu)
 
 
@@ -85,7 +85,7 @@ def fhn_inhibitor_kernel(c: wp.array(dtype=Any), epsilon: Any, kappa: Any, dt: A
 @wp.kernel
 def transport_kernel(old_mass: wp.array(dtype=Any), mass: wp.array(dtype=Any), values: wp.array(dtype=Any)):
     """Conservative transport across a surface move: each vertex keeps its amount M_I c_I, so
-    c_I ← c_I M_I(old) / M_I(new) (an amount per unit current area; SPEC §5, docs/chemistry.md)."""
+    c_I ← c_I M_I(old) / M_I(new) (an amount per unit current area; docs/theory/chemistry.md, docs/theory/chemistry.md)."""
     i = wp.tid()
     values[i] = values[i] * (old_mass[i] / mass[i])
 
@@ -119,7 +119,7 @@ def flip_kernel(
     previous: wp.array(dtype=Any), increment: wp.array(dtype=Any), earlier: wp.array(dtype=Any),
     streak: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32),
 ):  # fmt: skip
-    """Period-2 flip-flop detector, after each step (SPEC §8): d = c^{n+1} - c^n counts when it
+    """Period-2 flip-flop detector, after each step (docs/theory/scenes.md): d = c^{n+1} - c^n counts when it
     flips sign against d^n, |d| > floor (not round-off) and |d| >= hold |d^{n-1}| (not a decaying
     transient); `steps` counts in a row set flag = FLIP_FLOP. Keeps c^{n+1}, d, d^n for the next step."""
     i = wp.tid()

@@ -37,7 +37,8 @@ def imported(module: str, path: str, known: set) -> set:
                 base = f"{base}.{node.module}" if node.module else base
             else:
                 base = node.module
-            names = [base] + [f"{base}.{alias.name}" for alias in node.names]
+            # `from package import submodule` imports the submodule, not the package's own names
+            names = [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base for a in node.names]
         else:
             continue
         for name in names:

@@ -1,7 +1,7 @@
 """`wavewarp bench accuracy` (issue 7): the quick sweep through the CLI, its JSON and charts, and
 properties whose answers are known in advance: convergence with the level, float32 within stated
 bounds of float64, the Pareto fronts and the recommendations re-derived by brute force, the exact
-answers' own equations (SPEC §8)."""
+answers' own equations (docs/theory/scenes.md)."""
 
 import json
 import math
@@ -103,7 +103,7 @@ def test_float32_errors_stay_within_stated_bounds_of_float64(bench):
 
 
 def test_the_1d_front_reference_is_the_bistable_speed_without_w():
-    """SPEC §8 "FHN": with w ≡ 0 the converged 1-D lattice front runs at the Nagumo front's
+    """docs/theory/scenes.md: with w ≡ 0 the converged 1-D lattice front runs at the Nagumo front's
     √(2γ²)(½ − ν) (measured 2e-5); the reference checks its own second-order convergence in h."""
     bare = front_reference(0.0)
     assert bare["speed"] == pytest.approx(bare["bistable"], rel=1e-3)
@@ -114,7 +114,7 @@ def test_the_1d_front_reference_is_the_bistable_speed_without_w():
 def test_the_front_case_reports_stalls_and_a_travelling_front(bench):
     """Quick sweep (levels 3 and 5, lumped): every point is measured against the bench's 1-D
     reference; a stalled front is speed 0 and error 1 (no crash); level 5, where the lattice no
-    longer pins the front (docs/walkers.md), travels: 0 < error < 1."""
+    longer pins the front (docs/theory/dynamics.md), travels: 0 < error < 1."""
     _, result = bench
     block = result["cases"]["front"]
     assert block["reference"]["speed"] == pytest.approx(front_reference()["speed"], rel=1e-12)

@@ -1,4 +1,4 @@
-"""`wavewarp bench numbering --quick` (issue 7, docs/geometry.md "Numbering"): one row per level and
+"""`wavewarp bench numbering --quick` (issue 7, docs/theory/geometry.md#numbering-for-memory-locality): one row per level and
 numbering, the same forces in every numbering, the ratios against the old numbering."""
 
 import json

@@ -1,4 +1,4 @@
-"""The stability benchmark (issue 7, SPEC §8 "Stability"): its quick run through the CLI, and its
+"""The stability benchmark (issue 7, docs/theory/scenes.md): its quick run through the CLI, and its
 measured largest stable steps against bounds computed here, independently of the steppers'
 power iteration and Lanczos (dense eigenvalues of M⁻¹K, W_2 K and of a finite-difference Hessian)."""
 
@@ -16,7 +16,7 @@ from wavewarp.mesh import icosphere
 from wavewarp.shell import Shell
 
 RESOLUTION = 0.005  # bisection width, relative to the predicted bound
-NU = -0.01  # SPEC §5, the benchmark's FHN
+NU = -0.01  # docs/theory/chemistry.md, the benchmark's FHN
 
 
 @pytest.mark.slow

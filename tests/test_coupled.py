@@ -1,4 +1,4 @@
-"""Quasi-static coupling: a uniform concentration drives the sphere to the closed-form radius (SPEC §8)."""
+"""Quasi-static coupling: a uniform concentration drives the sphere to the closed-form radius (docs/theory/scenes.md)."""
 
 import math
 
@@ -79,7 +79,7 @@ def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
 
 def test_overdamped_accepts_a_round_off_stop_and_quasi_static_refuses_it(monkeypatch):
     """A relaxation whose line search finds no lower energy far above tol (as at the buckling's
-    sharpest fold, docs/scenes.md): quasi-static runs stop, overdamped ones go on from where it
+    sharpest fold, docs/theory/scenes.md): quasi-static runs stop, overdamped ones go on from where it
     stopped and count it."""
     import wavewarp.coupled
 

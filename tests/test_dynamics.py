@@ -1,4 +1,4 @@
-"""Walker mechanics (SPEC §3 "Walker scenes", §4, §8 "Contact"): shell dynamics, gravity, ground
+"""Walker mechanics (docs/theory/dynamics.md, §4, §8 "Contact"): shell dynamics, gravity, ground
 contact and friction, each against an answer known in advance."""
 
 import math
@@ -50,7 +50,7 @@ def test_stability_bound_is_the_largest_frequency_and_sharp(rng):
 
 
 def test_damping_lowers_the_bound_as_predicted(rng):
-    """Damped symplectic Euler on the top mode: dt < 2/ω (√(1+ζ²) - ζ) (SPEC §8 stability)."""
+    """Damped symplectic Euler on the top mode: dt < 2/ω (√(1+ζ²) - ζ) (docs/theory/scenes.md stability)."""
     mesh = icosphere(1.0, 1)
     shell = Shell(mesh, thickness=0.1, young=1000.0, **F64)
     free = ShellDynamics(shell, density=1.0)
@@ -153,7 +153,7 @@ def settle_on_ground(mesh, young, *, g=1.0, k=1e4, friction=0.1, until=20.0, dty
 
 
 def test_nearly_rigid_ball_settles_where_contact_carries_its_weight():
-    """SPEC §8: at rest Σ k z_i² = total weight; the height matches a rigid ball's (root of
+    """docs/theory/scenes.md: at rest Σ k z_i² = total weight; the height matches a rigid ball's (root of
     Σ k min(z_i + s, 0)² = W over the rest limit points), up to the elastic sag ∝ 1/Y."""
     mesh, g, k = icosphere(1.0, 2), 1.0, 1e4
     z = limit_positions(mesh, **F64)[:, 2]
@@ -172,7 +172,7 @@ def test_nearly_rigid_ball_settles_where_contact_carries_its_weight():
 
 
 def test_sliding_block_decelerates_at_mu_g():
-    """SPEC §8: with k_f |v_t| ≫ 1 friction is Coulomb's, the block slows at μ g."""
+    """docs/theory/scenes.md: with k_f |v_t| ≫ 1 friction is Coulomb's, the block slows at μ g."""
     g, mu, speed = 10.0, 0.5, 100.0  # k_f v ≥ 7.5 over the run: tanh = 1 - 6e-7
     run, _ = settle_on_ground(cube(1.0, 4), 1e6, g=g, friction=mu, until=3.0)
     kick = np.zeros((run.shell.mesh.n_vertices, 3))
@@ -193,7 +193,7 @@ def test_shell_at_rest_on_the_ground_stays_put(dtype, bound):
     """No wave: a ball resting on a vertex (a 5-fold symmetric contact, an equilibrium) moves less
     than `bound` R along the ground over 10⁴ steps after settling (measured 2e-15 in float64,
     1.2e-7 in float32). Placed on an asymmetric spot it first rocks to an equilibrium, slowly: the
-    tanh friction is viscous at low speed, drag μ k_f g per unit mass (docs/walkers.md)."""
+    tanh friction is viscous at low speed, drag μ k_f g per unit mass (docs/theory/dynamics.md)."""
     mesh = icosphere(1.0, 2)
     apex = mesh.vertices[np.flatnonzero(mesh.valence == 5)[0]]  # one of the icosahedron's twelve
     run, _ = settle_on_ground(mesh.turned(apex, [0.0, 0.0, -1.0]), 1e5, until=25.0, dtype=dtype)
@@ -255,7 +255,7 @@ def test_overdamped_stability_bound_is_two_drag_over_omega_squared_and_sharp(rng
 
 def test_overdamped_gradient_flow_reaches_the_closed_form_radius():
     """No ground, no gravity: the mobility model is a gradient flow and comes to rest at the
-    quasi-static equilibrium: under uniform c, the closed-form sphere radius (SPEC §8)."""
+    quasi-static equilibrium: under uniform c, the closed-form sphere radius (docs/theory/scenes.md)."""
     from wavewarp.benchmarks.accuracy_cases import closed_form_stretch
 
     R, h, AC, AI = 1.0, 0.05, 0.3, 0.5
@@ -286,7 +286,7 @@ def test_overdamped_refuses_a_drag_the_lagged_contact_cannot_follow():
 
 
 def test_area_contact_is_the_pressure_law_on_the_quadrature_points(device, rng):
-    """Ground(contact="area"): the SPEC §4 law as a pressure at the quadrature points, p_q and u_q
+    """Ground(contact="area"): the docs/theory/dynamics.md law as a pressure at the quadrature points, p_q and u_q
     the limit surface's points at x and v (NumPy through `limit_surface`, linear in x), spread back
     with the basis: the same total force Σ_q f_q dω̄⁰_q and the same virtual work Σ_q f_q·u_q dω̄⁰_q."""
     mesh = icosphere(1.0, 2)

@@ -1,4 +1,4 @@
-"""Limit surface kernels against exact answers (SPEC §2, §8): float64 unless stated."""
+"""Limit surface kernels against exact answers (docs/theory/geometry.md, docs/theory/scenes.md): float64 unless stated."""
 
 import numpy as np
 import pytest
@@ -108,7 +108,7 @@ def icosphere_errors(levels, radius=2.0):
 
 
 def test_icosphere_area_and_mean_curvature_converge():
-    """Measured orders (docs/geometry.md): area 2.3, H in L1 2.0, H in L2 1.1, radius 2.2.
+    """Measured orders (docs/theory/geometry.md): area 2.3, H in L1 2.0, H in L2 1.1, radius 2.2.
     H converges slowly in L2 and not pointwise: Loop surfaces flatten at valence-5 vertices."""
     errors = icosphere_errors([3, 4, 5])
     orders = np.log2(errors[:-1] / errors[1:])

@@ -1,4 +1,4 @@
-"""Laplace–Beltrami operator: invariants, scaling, sphere spectrum and its convergence (SPEC §5, §8, §9)."""
+"""Laplace–Beltrami operator: invariants, scaling, sphere spectrum and its convergence (docs/theory/chemistry.md, docs/theory/scenes.md)."""
 
 import numpy as np
 import pytest
@@ -92,7 +92,7 @@ def sphere_spectrum_error(level, discretization, mass):
 def test_sphere_spectrum_has_multiplicities_2l_plus_1_and_converges(discretization, mass, levels, order):
     """λ = l(l+1)/R², l <= 6, with multiplicity 2l+1; measured order of the worst relative error.
 
-    Measured (docs/chemistry.md): Galerkin subdivision (consistent mass) order 3.6-4.2, P1 and
+    Measured (docs/theory/chemistry.md): Galerkin subdivision (consistent mass) order 3.6-4.2, P1 and
     the lumped masses order 2.
     """
     errors = []

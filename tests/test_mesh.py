@@ -1,4 +1,4 @@
-"""Mesh validation messages, generators, Loop refinement and file I/O (SPEC §2, §9)."""
+"""Mesh validation messages, generators, Loop refinement and file I/O (docs/theory/geometry.md, docs/theory/scenes.md)."""
 
 import numpy as np
 import pytest

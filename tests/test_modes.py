@@ -1,5 +1,4 @@
-"""Softest modes of a shell equilibrium (wavewarp/modes.py, docs/shell.md "Stability of an
-equilibrium"): the classical buckling pressure of a sphere, eigenpairs checked on the energy itself,
+"""Softest modes of a shell equilibrium (wavewarp/modes.py, docs/theory/shell.md#stability-of-an-equilibrium): the classical buckling pressure of a sphere, eigenpairs checked on the energy itself,
 and the azimuthal order of a mode."""
 
 import math

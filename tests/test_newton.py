@@ -1,4 +1,4 @@
-"""The Newton finish of a relaxation (wavewarp/newton.py, docs/shell.md "Newton finish")."""
+"""The Newton finish of a relaxation (wavewarp/newton.py, docs/theory/shell.md#newton-finish)."""
 
 import numpy as np
 import pytest
@@ -50,7 +50,7 @@ def test_coloured_hessian_equals_central_differences_of_the_forces(rng, device, 
     for v in [rng.normal(size=x.shape) for _ in range(3)] + [x]:  # x: the volume's own direction
         reference = central_difference_hessian_action(shell, x, c, v)
         action = h @ v.ravel() + w @ (coupling @ (w.T @ v.ravel()))
-        # with volume, 2μV (V − V̄) ∇²(x̄·S) stays out: S = ⅓∫ n dω is zero up to quadrature (docs/shell.md)
+        # with volume, 2μV (V − V̄) ∇²(x̄·S) stays out: S = ⅓∫ n dω is zero up to quadrature (docs/theory/shell.md)
         bound = 1e-7 if volume_penalty == 0 else 1e-3
         assert np.abs(action - reference).max() <= bound * np.abs(reference).max()
 
@@ -65,7 +65,7 @@ def test_newton_reaches_the_closed_form_radius_quadratically():
     radius = np.linalg.norm(limit_positions(mesh, x, device="cpu", **F64), axis=1).mean() / R
     assert abs(radius - lam) < 1e-3 * abs(1 - lam)  # the same bound as CG's test at level 3 (test_shell.py)
     assert shell.newton_steps == len(residuals) <= 15 and residuals[-1] <= 1e-9
-    assert residuals[2] <= 10 * residuals[1] ** 2  # quadratic from 1e-3 down (docs/shell.md)
+    assert residuals[2] <= 10 * residuals[1] ** 2  # quadratic from 1e-3 down (docs/theory/shell.md)
     assert np.all(np.diff(shell.relax_history) <= 1e-12 * abs(shell.relax_history[0]))
 
 

@@ -1,4 +1,4 @@
-"""Numbering for memory locality (docs/geometry.md "Numbering"): `Mesh.reordered` is a pure
+"""Numbering for memory locality (docs/theory/geometry.md#numbering-for-memory-locality): `Mesh.reordered` is a pure
 renumbering (same surface, same mechanics and chemistry, permuted), applied by the generators,
 `load` and the refinement, and it gathers each patch and each warp's patches closer together."""
 
@@ -137,7 +137,7 @@ def test_seeded_noise_does_not_depend_on_the_numbering():
 
 
 def test_reordering_gathers_patches_closer_together():
-    """The statistics of docs/geometry.md "Numbering", on a level-4 icosphere and a shuffled one."""
+    """The statistics of docs/theory/geometry.md#numbering-for-memory-locality, on a level-4 icosphere and a shuffled one."""
     plain = icosphere(1.0, 4, reorder=False)
     stats = {name: patch_tables(m).locality() for name, m in
              (("plain", plain), ("numbered", icosphere(1.0, 4)), ("shuffled", shuffled(plain)),

@@ -1,4 +1,4 @@
-"""Scenes through the CLI (SPEC §6, §9): quick runs, USD and HDF5 outputs, resume, --set, bad input."""
+"""Scenes through the CLI (docs/theory/scenes.md): quick runs, USD and HDF5 outputs, resume, --set, bad input."""
 
 import json
 import math
@@ -160,7 +160,7 @@ def test_a_blow_up_at_an_unresolved_fold_says_so(monkeypatch):
 
 def test_uniform_concentration_through_the_cli_reaches_the_closed_form_radius(tmp_path, capsys):
     """--set width=1e6 makes the pulse uniform (c = 1 to 1e-10); without μV the stretch solves
-    λ³ - (s - ε) λ - ε k = 0 (SPEC §8)."""
+    λ³ - (s - ε) λ - ε k = 0 (docs/theory/scenes.md)."""
     R, h, AC, AI = 25.0, 1.25, 0.3, 0.5
     sets = [f"radius={R}", f"thickness={h}", f"AC={AC}", f"AI={AI}", "mu_v=0", "width=1e6", "level=3", "dtype=float64",
             "frames=1", "t_end=0.001"]  # fmt: skip
@@ -242,7 +242,7 @@ def test_interrupt_or_solver_failure_keeps_the_frames_written(stop, code, tmp_pa
 
 
 def test_oocyte_wave_is_rotationally_symmetric_at_constant_speed(tmp_path, capsys):
-    """SPEC §7 / Fig. 1c: arrival times against rest arc length on θ in [π/4, 3π/4] lie on one line
+    """docs/theory/scenes.md / Fig. 1c: arrival times against rest arc length on θ in [π/4, 3π/4] lie on one line
     (constant speed ≈ γ: the wave moves at γ relative to the material), and within each latitude
     ring they agree. R = 5 at level 3 resolves the pulse as R = 10 at level 4 does. Measured (two mass
     corrections, the default): speed 1.012 γ, deviation from the line 1.2% of the crossing time,
@@ -260,7 +260,7 @@ def test_oocyte_wave_is_rotationally_symmetric_at_constant_speed(tmp_path, capsy
 
 
 def test_ascidian_shell_stays_axisymmetric_and_ends_before_the_focus(tmp_path, capsys):
-    """SPEC §7 / Fig. 1a: the ascidian's strong contraction (AC = 1.5, AI = 1.6) keeps the shell
+    """docs/theory/scenes.md / Fig. 1a: the ascidian's strong contraction (AC = 1.5, AI = 1.6) keeps the shell
     rotationally symmetric while the paper's pulse (σ² = 2/R², R/7 wide) crosses it, the chemical
     conserved. At R = 5, level 3 (7 s): axisymmetric at every frame (0.2% R at most). The default
     (R = 10, level 4) wrinkles 4-fold by 3% R at 30° for t = 0.5–1.2 as the pulse leaves the pole (the
@@ -281,7 +281,7 @@ def test_ascidian_shell_stays_axisymmetric_and_ends_before_the_focus(tmp_path, c
 @pytest.mark.slow
 @pytest.mark.parametrize("scene", ["cube-waves", "prism-waves"])
 def test_box_wave_arrives_after_the_unfolded_net_distance(scene, tmp_path, capsys):
-    """SPEC §7 / Fig. 2b: from a face centre the arrival times on that face and the faces around it
+    """docs/theory/scenes.md / Fig. 2b: from a face centre the arrival times on that face and the faces around it
     follow the distance in the unfolded net over γ (the eikonal solution), not the straight chord
     through the box. Measured at 16 divisions: speed 1.04 γ (cube), 0.997 γ (prism); deviation 0.74 /
     0.41 against 2.1 / 2.3 control-edge crossing times for the chord (the default 24, t_end = 2L/γ,
@@ -457,10 +457,7 @@ def test_prism_wave_leaves_the_exact_imprint_on_the_opposite_face(origin, fold, 
 ACCURACY = os.path.join(os.path.dirname(__file__), os.pardir, "benchmarks", "results", "accuracy_cpu.json")
 DEPARTURES = {  # scene: {axis: (recommended, the scene's)} where the scene's physics needs more than the checks
     "buckling-modes": {"level": (3, 4)},  # the buckling wavelength (scenes/buckling_modes.py)
-    # the contracted shell's shape (scenes/ascidian.py); dt 0.4 × the rest bound leaves room for the contraction
-    # (lengths shrink to e^{-AC/2} = 0.47 at c = 1, and the guard refuses dt past the moving bound)
-    "ascidian": {"level": (3, 4), "dt_fraction": (0.9, 0.4)},
-    # the rounded box edges' curvature (docs/geometry.md: rule 3 misses 3% of the Gauss–Bonnet integral), which
+    # the rounded box edges' curvature (docs/theory/geometry.md: rule 3 misses 3% of the Gauss–Bonnet integral), which
     # the checks' proxies do not see; rule 3 meets them too, and which of the two is cheaper changes between runs
     "cube-waves": {"rule": ("3", "3x4")},
     "prism-waves": {"rule": ("3", "3x4")},
@@ -482,8 +479,8 @@ def declared(scene) -> dict:
 
 @pytest.mark.parametrize("scene", scene_descriptions())
 def test_scene_defaults_are_the_accuracy_benchmarks_recommendation(scene):
-    """Issue 7, SPEC §6 ("the coarsest resolution that meets its accuracy"): every default the accuracy
-    benchmark sweeps is the committed full run's `scene_settings` (BENCHMARKS.md "Accuracy"), but for
+    """Issue 7, docs/theory/scenes.md ("the coarsest resolution that meets its accuracy"): every default the accuracy
+    benchmark sweeps is the committed full run's `scene_settings` (BENCHMARKS.md#accuracy-against-cost), but for
     the stated DEPARTURES: a new result or a changed default fails here until the other follows."""
     with open(ACCURACY) as f:
         result = json.load(f)

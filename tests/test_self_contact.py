@@ -1,4 +1,4 @@
-"""Self-contact (ours, docs/shell.md "Self-contact"): an exact energy term that keeps layers apart."""
+"""Self-contact (ours, docs/theory/shell.md#self-contact): an exact energy term that keeps layers apart."""
 
 import math
 
@@ -89,7 +89,7 @@ def test_deterministic_gather_equals_the_atomic_spread(pressed):
 
 def test_two_facing_layers_push_with_the_continuum_pressure():
     """Near the axis the squashed sphere's caps are two nearly flat layers at gap s = 2 R f: the
-    force per area there approaches the flat-layer law 2π A s (d/s - 1)³ (docs/shell.md)."""
+    force per area there approaches the flat-layer law 2π A s (d/s - 1)³ (docs/theory/shell.md)."""
     mesh = icosphere(1.0, 4)
     shell = Shell(mesh, 0.1, 1.0, device="cpu", **F64)
     contact = shell.self_contact = SelfContact(shell)

@@ -1,4 +1,4 @@
-"""Koiter shell: rest state, invariances, exact gradients, closed-form sphere radius (SPEC §3, §8)."""
+"""Koiter shell: rest state, invariances, exact gradients, closed-form sphere radius (docs/theory/shell.md, docs/theory/scenes.md)."""
 
 import numpy as np
 import pytest
@@ -105,7 +105,7 @@ def test_bilayer_and_koiter_bend_the_same_way_on_a_sphere():
 
 
 def sphere_stretch(AC, AI, h, R, mu_v, young=1.0, nu=0.33, c=1.0):
-    """λ = r/R minimising the 1-D energy of a sphere of radius r under uniform c (SPEC §8)."""
+    """λ = r/R minimising the 1-D energy of a sphere of radius r under uniform c (docs/theory/scenes.md)."""
     s, k = np.exp(-AC * c), 1 - AI * c
 
     def energy(lam):
@@ -124,7 +124,7 @@ def sphere_stretch(AC, AI, h, R, mu_v, young=1.0, nu=0.33, c=1.0):
 def test_uniform_concentration_sphere_reaches_the_closed_form_radius(AC, AI, h_over_R, mu_v):
     R, young = 2.0, 1.0
     h = h_over_R * R
-    penalty = mu_v * young * h / R**4  # μV in units of Y h / R⁴, as in SPEC §6
+    penalty = mu_v * young * h / R**4  # μV in units of Y h / R⁴, as in docs/theory/scenes.md
     lam = sphere_stretch(AC, AI, h, R, penalty, young)
     if mu_v == 0:  # the cubic of the issue, without the volume term
         s, k, eps = np.exp(-AC), 1 - AI, h**2 / (6 * R**2)
@@ -165,7 +165,7 @@ def test_float32_relax_meets_its_default_tolerance(device):
 
 
 def test_captured_relaxation_runs_the_host_loops_arithmetic_and_serves_every_later_call(device):
-    """The relaxation is one captured device loop (docs/shell.md); with a callback the same loop
+    """The relaxation is one captured device loop (docs/theory/shell.md); with a callback the same loop
     body runs from the host. Both take the same steps (bitwise on the CPU, up to the order of
     atomic sums on a GPU), and the shell's one graph honours each call's tolerance and budget."""
     mesh = icosphere(1.0, 2)

@@ -1,4 +1,4 @@
-"""Loop basis: partition of unity, linear precision, corner limit masks, derivatives (SPEC §8)."""
+"""Loop basis: partition of unity, linear precision, corner limit masks, derivatives (docs/theory/scenes.md)."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""HDF5 trajectories: SPEC §9 schema, atomic writes, Ctrl-C keeps frames, resume appends."""
+"""HDF5 trajectories: docs/theory/scenes.md schema, atomic writes, Ctrl-C keeps frames, resume appends."""
 
 import json
 import os

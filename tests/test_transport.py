@@ -1,4 +1,4 @@
-"""The chemical on a moving surface (SPEC §5 "Transport on the moving surface"; docs/chemistry.md).
+"""The chemical on a moving surface (docs/theory/transport.md; docs/theory/chemistry.md).
 
 Conservative transport keeps each vertex's amount M_I c_I across a surface move, so the total
 C = Σ M_I c_I changes only through the equation's own terms: for the telegraph equation
@@ -129,7 +129,7 @@ def rising_crossings(values, dt, level=0.5):
 @pytest.mark.parametrize("transport", ["conservative", "material"])
 def test_uniform_fhn_on_a_contracting_sphere_oscillates_faster(transport):
     """FitzHugh–Nagumo with uniform c on a quasi-static sphere: c stays uniform (K·1 = 0), and the
-    sphere's area follows the closed-form stretch λ(c)² of SPEC §8. Conserving the chemical, each
+    sphere's area follows the closed-form stretch λ(c)² of docs/theory/scenes.md. Conserving the chemical, each
     step is the scalar map c ← c̃ λ(c̃_prev)² / λ(c̃)² after the kinetic step c̃ (the shell relaxes to
     c̃, then the surface moves); written out here, it oscillates 15% faster than the bare kinetics,
     the paper's "mechanical feedback increases the wave frequency". The material reading keeps the

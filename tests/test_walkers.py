@@ -1,7 +1,7 @@
-"""Walker scenes (SPEC §6, §7 Fig. 3a; issue 6): FHN waves drive shells over the ground.
+"""Walker scenes (docs/theory/scenes.md Fig. 3a; issue 6): FHN waves drive shells over the ground.
 
 Quick runs on coarse meshes (level-2 sphere, 4-division prism) keep these to seconds per period
-on a 2-core CPU; the full runs are `wavewarp bench locomotion` (BENCHMARKS in docs/walkers.md)."""
+on a 2-core CPU; the full runs are `wavewarp bench locomotion` (BENCHMARKS.md)."""
 
 import json
 
@@ -45,7 +45,7 @@ def walk(scene, **overrides):
 
 
 def test_sphere_walker_quick_run_writes_the_walker_outputs(tmp_path, capsys):
-    """SPEC §9: velocities and inhibitor frames, /World/Ground, the locomotion measurements in
+    """docs/theory/scenes.md: velocities and inhibitor frames, /World/Ground, the locomotion measurements in
     --json and the HDF5 attributes. On the insensitive twin the measured period is the FHN kinetics'
     own (the origin is the pacemaker: its oscillation is the limit cycle), computed here
     independently; the sensitive shell's contraction shortens it (tests/test_transport.py)."""
@@ -57,10 +57,10 @@ def test_sphere_walker_quick_run_writes_the_walker_outputs(tmp_path, capsys):
     assert code == 0, err
     result = json.loads(stdout)
     assert result["period"] == pytest.approx(kinetic_period_by_euler(), rel=0.01)
-    # float32 round-off breaks the y-mirror symmetry and rolling amplifies it (docs/walkers.md: 0.08 R over
+    # float32 round-off breaks the y-mirror symmetry and rolling amplifies it (docs/theory/dynamics.md: 0.08 R over
     # 6 periods); measured 1.9e-3 of the distance here. The symmetry itself: float64, to 1e-8, below.
     assert result["speed_R_per_T"] is not None and abs(result["lateral_R"]) < 1e-2 * abs(result["distance_R"])
-    assert 0.005 < result["sag_R"] < 0.05  # a few % of R (docs/walkers.md)
+    assert 0.005 < result["sag_R"] < 0.05  # a few % of R (docs/theory/dynamics.md)
     assert any(path.endswith("_locomotion.png") for path in result["outputs"])
     stage = Usd.Stage.Open(str(out))
     assert UsdGeom.Mesh(stage.GetPrimAtPath("/World/Ground")).GetPointsAttr().Get() is not None
@@ -112,7 +112,7 @@ def test_mirrored_origin_mirrors_the_walk(scene):
 
 @pytest.mark.slow
 def test_overdamped_walker_moves_only_as_far_as_friction_can_drag_it():
-    """`mechanics=overdamped` (the mobility model, docs/walkers.md "Which mechanics"): the drag is
+    """`mechanics=overdamped` (the mobility model, docs/theory/dynamics.md#overdamped-model): the drag is
     2 η_ground by default, and the centre of mass moves at (net external force)/(ζ ΣM), whose
     horizontal part, friction, is at most μ W: |Δx_com| ≤ μ g t / ζ over the wave's time t."""
     run = walk("sphere-walker", periods=0.15, frames=1, mechanics="overdamped")

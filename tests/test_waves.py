@@ -1,4 +1,4 @@
-"""Telegraph and FitzHugh–Nagumo waves: invariants, exact solutions, arrival times, stability (SPEC §5, §8).
+"""Telegraph and FitzHugh–Nagumo waves: invariants, exact solutions, arrival times, stability (docs/theory/chemistry.md, docs/theory/scenes.md).
 
 Every reference here is computed independently in the test: the Legendre series of the
 telegraph equation on a sphere, great-circle and unfolded-net distances, a finite-difference
@@ -34,7 +34,7 @@ def sphere_operator(radius, level, **kwargs):
 @pytest.mark.parametrize("alpha", [0.001, 0.3])
 @pytest.mark.parametrize("discretization, mass_corrections", [("subdivision", 0), ("subdivision", 2), ("p1", 0)])
 def test_total_concentration_obeys_its_damped_law(alpha, discretization, mass_corrections):
-    """C'' + α C' = 0 (SPEC §5): leapfrog's C' decays by (1 - αdt/2)/(1 + αdt/2) per step, to
+    """C'' + α C' = 0 (docs/theory/chemistry.md): leapfrog's C' decays by (1 - αdt/2)/(1 + αdt/2) per step, to
     round-off, which is e^{-α dt} up to α³dt³/12 per step."""
     op = sphere_operator(1.0, 2, discretization=discretization)
     c0, v0 = gaussian_pulse(op, 0, 0.4, gamma=1.0)
@@ -253,7 +253,7 @@ def test_blow_up_stops_with_a_clear_error_and_keeps_the_last_finite_state(rng):
     assert np.abs(wave.concentration()).max() <= wave.blowup_limit
 
 
-# ---------------------------------------------------------------- FHN flip-flop past the bound (SPEC §8)
+# ---------------------------------------------------------------- FHN flip-flop past the bound (docs/theory/scenes.md)
 
 
 def flip_flags(values):
@@ -342,7 +342,7 @@ def test_fhn_below_the_bound_runs_long_without_a_flip_flop(scheme):
 
 @pytest.mark.parametrize("scheme", ["explicit", "imex"])
 def test_fhn_pulses_at_the_default_dt_never_trip_the_flip_detector(scheme):
-    """SPEC parameters, float32, dt = None (0.9 × the bound), a narrow pulse (control values up to
+    """the paper's parameters, float32, dt = None (0.9 × the bound), a narrow pulse (control values up to
     1.2) on a level-2 sphere: 2000 steps, about 7 kinetic periods of pulses from the pacemaker."""
     op = LaplaceBeltrami(icosphere(1.0, 2), device="cpu", dtype="float32")
     c0, _ = gaussian_pulse(op, 0, 0.3, gamma=0.2)
@@ -383,7 +383,7 @@ def latitude_arrival(theta, speed, radius, diffusion):
 
 
 def test_fhn_pulse_speed_on_a_large_sphere_matches_the_1d_pulse():
-    """SPEC §5 parameters; R = 6 (30 front widths), subdivision, lumped mass, level 5."""
+    """docs/theory/chemistry.md parameters; R = 6 (30 front widths), subdivision, lumped mass, level 5."""
     gamma, nu, kappa, epsilon, radius = 0.2, -0.01, 1e-4, 0.005, 6.0
     speed_1d = fhn_speed_1d(gamma, nu, kappa, epsilon)
     op = sphere_operator(radius, 5)

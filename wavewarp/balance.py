@@ -1,4 +1,4 @@
-"""Measurements of the chemical over a run: its balance (SPEC §5), the total C = ∫ c dω against
+"""Measurements of the chemical over a run: its balance (docs/theory/chemistry.md), the total C = ∫ c dω against
 what the equation alone gives, with the smallest concentration; and the first front's arrival.
 
 A wave scene records every frame it writes (or reads back on resume). C is Σ M_I c_I with the

@@ -115,7 +115,7 @@ def opposite_face(run, faces, fronts):
 
 
 def imprint_measurements(run, faces, fronts) -> dict:
-    """The imprint on the face opposite the origin (SPEC §7, Fig. 2): `imprint_fold`, how many fronts
+    """The imprint on the face opposite the origin (docs/theory/scenes.md, Fig. 2): `imprint_fold`, how many fronts
     (unfolded images of the origin) of the exact geodesic field arrive first somewhere on its
     vertices; `imprint_deviation`, the largest |arrival − (d/γ + fitted offset)| there in
     control-edge crossing times, d the exact distance; the same for the straight chord and, per

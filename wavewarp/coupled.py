@@ -132,7 +132,7 @@ class Walking:
        the mechanics' bound), so both clocks stay equal; before substep k the shell's active
        reference follows c⁰ + (k/substeps)(c¹ - c⁰) (`ramp`, the default; device to device), or
        jumps to c¹ before the first (`ramp=False`: each chemistry step then kicks the shell's stiffest
-       modes, docs/theory/walkers.md "Reference ramp");
+       modes, docs/theory/dynamics.md#the-active-reference-ramp);
     3. deformation-sensitive runs move the wave to the new positions (the solver's `move_surface`,
        which carries the chemical with the material); the insensitive twin keeps the rest surface;
     4. `recorder()`, if given, launches device-only work (e.g. a trace row).

@@ -1,4 +1,4 @@
-"""Device and dtype choices shared by every computing class (SPEC §9)."""
+"""Device and dtype choices shared by every computing class (docs/theory/scenes.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Shell dynamics for the walkers (docs/theory/walkers.md): solvers and ready-to-run steppers.
+"""Shell dynamics for the walkers (docs/theory/dynamics.md): solvers and ready-to-run steppers.
 
     M_I dv_I/dt = F_I(x) - M_I g ẑ + (Lᵀ f_ground)_I - η M_I (v_I - v_rigid),     dx_I/dt = v_I
 
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .checks import count, finite, positive
+from .checks import finite, positive
 from .device import reduction_threads
 from .geometry import LimitMask, checked_positions, evaluate
 from .kernels import contact as kernels_contact
@@ -72,7 +72,7 @@ class Ground:
 
     contact "point" (the paper's): the law acts on each control vertex's limit point, k and β per point.
     contact "area" (ours): the law is a pressure at the quadrature points of the limit surface,
-    k and β per unit rest area, so the load pattern converges under refinement (docs/walkers.md).
+    k and β per unit rest area, so the load pattern converges under refinement (docs/theory/dynamics.md).
     """
 
     stiffness: float = 10.0  # k
@@ -206,7 +206,7 @@ class InertialSolver:
         if self.ground is None:
             return
         m, n, s, g, t = self.mask, len(self._limit_x), self.scalar, self.ground, self.shell.tables
-        patch = [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
+        patch = t.patch()
         if g.contact == "point":
             wp.launch(limit_motion_kernel, dim=n, inputs=[x, v, m.ring_start, m.ring, m.centre_weight, m.ring_weight],
                       outputs=[self._limit_x, self._limit_v])  # fmt: skip

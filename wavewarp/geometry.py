@@ -1,4 +1,4 @@
-"""The Loop limit surface on a device (SPEC §2, §9).
+"""The Loop limit surface on a device (docs/theory/geometry.md, docs/theory/scenes.md).
 
 `SurfaceTables` holds a mesh's patch tables on one device in one dtype, built once and
 shared by every kernel that evaluates the surface (geometry, mechanics, chemistry).
@@ -61,7 +61,7 @@ class _DeviceArrays:
 
 
 class LimitMask(_DeviceArrays):
-    """Loop's limit-position mask as a CSR of one-rings (SPEC §8)."""
+    """Loop's limit-position mask as a CSR of one-rings (docs/theory/scenes.md)."""
 
     def __init__(self, mesh: Mesh, *, device=None, dtype="float32"):
         super().__init__(mesh, device=device, dtype=dtype)
@@ -87,6 +87,15 @@ class SurfaceTables(_DeviceArrays):
             self.triangle_type = wp.array(host.triangle_type, dtype=wp.int32)
             self.basis = wp.array(host.basis.astype(real), dtype=vec6(self.scalar))
             self.weights = wp.array(host.weights.astype(real), dtype=self.scalar)
+
+    def patch(self) -> list:
+        """The arguments of every kernel that gathers over a triangle's patch, in their order: patch_start,
+        patch_vertices, triangle_type, basis, points_per_triangle."""
+        return [self.patch_start, self.patch_vertices, self.triangle_type, self.basis, self.points_per_triangle]
+
+    def weighted_patch(self) -> list:
+        """`patch()` with the quadrature weights before points_per_triangle (the kernels that integrate)."""
+        return [self.patch_start, self.patch_vertices, self.triangle_type, self.basis, self.weights, self.points_per_triangle]
 
     @property
     def n_quadrature_points(self) -> int:

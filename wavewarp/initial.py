@@ -1,4 +1,4 @@
-"""Initial conditions of the chemical waves (SPEC §5): the outgoing Gaussian pulse and the steady front."""
+"""Initial conditions of the chemical waves (docs/theory/chemistry.md): the outgoing Gaussian pulse and the steady front."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def nodal_normals(operator: LaplaceBeltrami) -> np.ndarray:
 
 
 def gaussian_pulse(operator: LaplaceBeltrami, origin, sigma, *, gamma, amplitude=1.0, radius=None, distance="chord"):
-    """Outgoing Gaussian pulse (SPEC §5): control values (c0, v0) of
+    """Outgoing Gaussian pulse (docs/theory/chemistry.md): control values (c0, v0) of
 
         c = C0 exp(-(s/R)² / (2σ²)),   c_t = -γ ∂c/∂s = γ C0 s / (R² σ²) exp(-(s/R)² / (2σ²)) ≥ 0
 
@@ -54,7 +54,7 @@ def gaussian_pulse(operator: LaplaceBeltrami, origin, sigma, *, gamma, amplitude
 
 
 def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=None):
-    """The buckling-mode runs' steady front (SPEC §5, supplement Fig. S1b): control values (c0, v0).
+    """The buckling-mode runs' steady front (docs/theory/chemistry.md, supplement Fig. S1b): control values (c0, v0).
 
         c = [1 + e^{-δk}] / [1 + e^{k(|z| - δ)}]        (c = 1 at the origin, the front at |z| = δ)
         c_t = -γ (dc/d|z|) |∇_Γ |z||,  |∇_Γ z| = sqrt(1 - (n·ê)²)      (outgoing at speed γ)

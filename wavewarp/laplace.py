@@ -1,15 +1,15 @@
-"""The Laplace–Beltrami operator on a shell's limit surface (SPEC §5, §9).
+"""The Laplace–Beltrami operator on a shell's limit surface (docs/theory/chemistry.md, docs/theory/scenes.md).
 
 `LaplaceBeltrami(mesh, x)` discretises -Δ_LB on the surface at control positions `x`:
 
 * `discretization="subdivision"` (default): Galerkin on the Loop basis, the field
-  `c(θ) = Σ N_I c_I` (control values, SPEC §2), lumped mass `M_I = ∫ N_I dω` and the
+  `c(θ) = Σ N_I c_I` (control values, docs/theory/geometry.md), lumped mass `M_I = ∫ N_I dω` and the
   matrix-free stiffness action `(K c)_I = ∫ a^{αβ} N_I,α c,β dω`;
 * `discretization="p1"`: piecewise-linear (cotangent) elements on the control connectivity,
   with every vertex placed at its Loop limit point, so that the polyhedron interpolates the
   same limit surface; barycentric lumped mass; nodal values.
 
-Both expose the same interface, so the two can be charted against each other (docs/chemistry.md).
+Both expose the same interface, so the two can be charted against each other (docs/theory/chemistry.md).
 `assembled=True` (default) sums K into CSR rows whenever the surface moves and applies it with
 one gather per vertex; `assembled=False` applies it matrix-free, per quadrature point with
 atomic scatter to the patch. Same K; the assembled action is several times faster (measured in
@@ -147,8 +147,7 @@ class LaplaceBeltrami:
         if self.discretization == "subdivision":
             t = self.tables
             wp.launch(surface_metric_kernel, dim=t.n_quadrature_points,
-                      inputs=[self._x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights,
-                              t.points_per_triangle, self._j_floor],
+                      inputs=[self._x, *t.weighted_patch(), self._j_floor],
                       outputs=[self._flux_metric, self._area, self.mass_device],
                       device=self.device)  # fmt: skip
         else:
@@ -188,7 +187,7 @@ class LaplaceBeltrami:
 
     def _patch(self) -> list:
         t = self.tables
-        return [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
+        return t.patch()
 
     def mass(self) -> np.ndarray:
         """(V,) lumped mass: ∫ N_I dω (subdivision; sums to the limit-surface area) or area / 3 (P1)."""
@@ -258,7 +257,7 @@ class LaplaceBeltrami:
 
         W_p = M_L⁻¹ Σ_{j≤p} (I - M_c M_L⁻¹)^j is symmetric positive definite, tends to M_c⁻¹ as p
         grows, and keeps 1ᵀM_L W_p = 1ᵀ (total concentration conserved exactly); on smooth fields
-        it matches M_c⁻¹ to O(h^{2p+2}) (docs/chemistry.md).
+        it matches M_c⁻¹ to O(h^{2p+2}) (docs/theory/chemistry.md).
         """
         n = self.n_vertices
         wp.launch(divide_kernel, dim=n, inputs=[f, self.mass_device], outputs=[out], device=self.device)

@@ -46,7 +46,7 @@ class ArrivalTimes:
 
 
 def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), rings=12) -> dict:
-    """Wave speed and rotational symmetry of a pulse from the pole (SPEC §7, Fig. 1c).
+    """Wave speed and rotational symmetry of a pulse from the pole (docs/theory/scenes.md, Fig. 1c).
 
     Arrival times against the rest arc length R θ on θ in `theta_range`: the speed is the slope's
     inverse, `speed_nonlinearity` the largest deviation from the line over the time to cross the
@@ -72,7 +72,7 @@ def sphere_wave_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4), ri
 
 
 # a shell reads as axisymmetric while every ring mode is below this fraction of R: the icosphere's
-# imprint reads up to 0.03% on the oocytes, a buckled ascidian 5% and more (docs/scenes.md)
+# imprint reads up to 0.03% on the oocytes, a buckled ascidian 5% and more (docs/theory/scenes.md)
 AXISYMMETRY_TOLERANCE = 0.01
 
 
@@ -149,7 +149,7 @@ def symmetry_number(run, x, threshold=0.1) -> tuple:
     ring at the wave front (rest polar angle γ t / R, one control edge wide), less its axisymmetric
     trend across the ring, and its amplitude in units of h; n = 0 while every mode is below
     `threshold` h (axisymmetric). A tenth of h: on shells that do not buckle the icosphere's imprint,
-    the seeded imperfection and the irregular ring's residual read up to 0.03 h (docs/scenes.md)."""
+    the seeded imperfection and the irregular ring's residual read up to 0.03 h (docs/theory/scenes.md)."""
     R, rest = run.size, run.mesh.vertices
     theta, phi = polar_coordinates(run)
     front = min((run.front_start + run.p.gamma * run.profile_time) / R, math.pi)

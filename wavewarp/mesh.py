@@ -1,10 +1,10 @@
-"""Closed triangle control meshes: validation, generators, file I/O, Loop refinement (SPEC §2, §9).
+"""Closed triangle control meshes: validation, generators, file I/O, Loop refinement (docs/theory/geometry.md, docs/theory/scenes.md).
 
 A `Mesh` is validated on construction; a bad mesh raises `ValueError` naming the first
 offending element and the fix. Generators return meshes with well-shaped triangles and
 outward normals; `icosphere` places its control points so that their *limit* points lie on
 the requested sphere. Generators and `load` number vertices and triangles for memory locality
-(`Mesh.reordered`, docs/geometry.md "Numbering"): neighbouring triangles, and the control
+(`Mesh.reordered`, docs/theory/geometry.md#numbering-for-memory-locality): neighbouring triangles, and the control
 vertices of one patch, lie close together in the device arrays.
 """
 
@@ -75,7 +75,7 @@ class Mesh:
 
     @property
     def needs_refinement(self) -> bool:
-        """True where a triangle touches two or more extraordinary vertices (SPEC §2)."""
+        """True where a triangle touches two or more extraordinary vertices (docs/theory/geometry.md)."""
         return bool(np.any((self.valence[self.triangles] != 6).sum(axis=1) > 1))
 
     def volume(self, x=None) -> float:
@@ -122,7 +122,7 @@ class Mesh:
         return np.argsort(first_use, kind="stable"), triangle_order
 
     def reordered(self, keep_triangle_order: bool = False) -> Mesh:
-        """The same mesh numbered for memory locality (docs/geometry.md "Numbering").
+        """The same mesh numbered for memory locality (docs/theory/geometry.md#numbering-for-memory-locality).
 
         Triangles follow a 3-D Hilbert curve through their centroids (or keep their order, for
         meshes already ordered locally such as Loop refinements: children 4t..4t+3 of triangle t);
@@ -153,7 +153,7 @@ class Mesh:
         return mesh
 
     def limit_mask_matrix(self):
-        """Rows (i, j, weight) of the limit-position mask: limit = L @ control (SPEC §8)."""
+        """Rows (i, j, weight) of the limit-position mask: limit = L @ control (docs/theory/scenes.md)."""
         n = self.valence.astype(np.float64)
         chi = limit_weight(n)
         e = self.edges
@@ -164,7 +164,7 @@ class Mesh:
 
 
 # ---------------------------------------------------------------------------------------------
-# Numbering for locality (docs/geometry.md "Numbering")
+# Numbering for locality (docs/theory/geometry.md#numbering-for-memory-locality)
 
 
 def hilbert_keys(points, bits: int = 16) -> np.ndarray:
@@ -353,7 +353,7 @@ def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True, reorde
 
     The icosahedron is refined by Loop subdivision and projected onto the sphere, which
     spaces the vertices smoothly (midpoint splitting leaves kinks in the spacing along the
-    icosahedron's edges that cost an O(1) mean-curvature error there; docs/geometry.md).
+    icosahedron's edges that cost an O(1) mean-curvature error there; docs/theory/geometry.md).
     With `limit=True` (default) the control points are then placed so that their Loop limit
     points lie on the sphere; otherwise the control points themselves do. The triangles stay in
     subdivision order (already local), the vertices are renumbered in the order the triangles

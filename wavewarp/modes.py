@@ -1,4 +1,4 @@
-"""Softest deformation modes of a shell at an equilibrium (docs/shell.md, "Stability of an equilibrium").
+"""Softest deformation modes of a shell at an equilibrium (docs/theory/shell.md#stability-of-an-equilibrium).
 
 The smallest eigenvalues λ of H v = λ M v, with H the Hessian of E_S + E_B + E_V at the positions
 (the Newton finish's exact sparse Hessian, wavewarp/newton.py) and M the lumped rest vertex areas
@@ -29,7 +29,7 @@ class Modes:
 
 def softest_modes(shell, x, c=0.0, count: int = 6) -> Modes:
     """The `count` smallest eigenpairs of the shell's Hessian at positions x under concentrations c
-    (SPEC §3 energies), rigid motions removed; x should be an equilibrium (Shell.relax)."""
+    (docs/theory/shell.md energies), rigid motions removed; x should be an equilibrium (Shell.relax)."""
     from .laplace import LaplaceBeltrami
 
     if shell.self_contact is not None:

@@ -1,4 +1,4 @@
-"""Newton finish of a relaxation (docs/shell.md, "Newton finish"): Levenberg–Marquardt steps on the
+"""Newton finish of a relaxation (docs/theory/shell.md#newton-finish): Levenberg–Marquardt steps on the
 exact sparse Hessian, for the equilibria nonlinear CG crawls towards.
 
 Near the late oocyte equilibria the Hessian's condition number reaches 1e6 and more (a nearly
@@ -58,15 +58,20 @@ def patch_pairs(host, n_vertices: int) -> sparse.csr_matrix:
 
 
 def distance_two_colouring(pattern: sparse.csr_matrix) -> np.ndarray:
-    """Greedy colours such that no row of `pattern` holds two vertices of one colour."""
-    square = (pattern @ pattern).tocsr()
-    colour = np.full(pattern.shape[0], -1, dtype=np.int32)
-    for i in range(pattern.shape[0]):
-        used = colour[square.indices[square.indptr[i] : square.indptr[i + 1]]]
-        free = np.ones(len(used) + 1, dtype=bool)
-        free[used[(used >= 0) & (used <= len(used))]] = False
-        colour[i] = int(np.argmax(free))
-    return colour
+    """Colours such that no row of `pattern` holds two vertices of one colour: Warp's graph colouring
+    (`warp.utils.graph_coloring_assign`, the better of its MCS and greedy orderings) of the graph whose
+    edges join the vertices that share a row. Measured against a greedy NumPy colouring
+    (benchmarks/warp_libraries.py): 2× faster and 3–9% fewer colours, so fewer force evaluations."""
+    square = (pattern @ pattern).tocoo()
+    upper = square.row < square.col
+    edges = wp.array(np.stack([square.row[upper], square.col[upper]], axis=1).astype(np.int32), device="cpu")
+    best = None
+    for algorithm in (wp.utils.GraphColoringAlgorithm.MCS, wp.utils.GraphColoringAlgorithm.GREEDY):
+        colours = wp.empty(pattern.shape[0], dtype=wp.int32, device="cpu")
+        count = wp.utils.graph_coloring_assign(edges, colours, algorithm)
+        if best is None or count < best[0]:
+            best = (count, colours.numpy().copy())
+    return best[1]
 
 
 def rigid_modes(x: np.ndarray) -> np.ndarray:

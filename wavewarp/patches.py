@@ -1,4 +1,4 @@
-"""Per-mesh subdivision tables (SPEC §2), built once in NumPy.
+"""Per-mesh subdivision tables (docs/theory/geometry.md), built once in NumPy.
 
 A triangle's limit surface is `x(θ) = Σ_k N_k(θ) x[patch_vertices[start + k]]`. The basis
 values depend only on the patch *type* — (valence of the extraordinary corner, which corner)
@@ -63,7 +63,7 @@ class PatchTables:
 
     def locality(self, vertex_bytes: int = 12, warp: int = 32, block: int = 256, sector: int = 32) -> dict:
         """How scattered the patch gathers are in a per-vertex array of `vertex_bytes` per vertex
-        (float32 vec3: 12), one thread per triangle (docs/geometry.md "Numbering"):
+        (float32 vec3: 12), one thread per triangle (docs/theory/geometry.md#numbering-for-memory-locality):
 
         * `span`: mean over triangles of the largest minus the smallest control-vertex index;
         * `warp_sectors`: distinct `sector`-byte sectors that the warp-wide reads of the k-th patch

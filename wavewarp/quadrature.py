@@ -1,11 +1,11 @@
-"""Symmetric quadrature rules on the parameter triangle {v, w >= 0, v + w <= 1} (SPEC §2).
+"""Symmetric quadrature rules on the parameter triangle {v, w >= 0, v + w <= 1} (docs/theory/geometry.md).
 
 Weights sum to 1/2, the parameter triangle's area. Rules (Dunavant 1985):
 "3" (degree 2, the default), "6" (degree 4), "7" (degree 5), "12" (degree 6).
 
 Composite rules "BxS" apply base rule B on each of S = 4^k congruent sub-triangles (k
 midpoint splits), e.g. "3x16". Curvature concentrated at sharp control-mesh corners (cube,
-prism) is integrated far better by a composite rule than by a higher degree (docs/quadrature.md).
+prism) is integrated far better by a composite rule than by a higher degree (docs/theory/geometry.md#quadrature).
 """
 
 from __future__ import annotations

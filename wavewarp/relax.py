@@ -1,6 +1,6 @@
 """Quasi-static relaxation of a Shell: preconditioned nonlinear CG (Polak–Ribière+) with an
-Armijo line search on a parabolic step estimate (SPEC §3; choice and measurements in
-docs/shell.md). Vectors and the line search's scalars live on the device: a relaxation is one
+Armijo line search on a parabolic step estimate (docs/theory/shell.md; choice and measurements in
+docs/theory/shell.md). Vectors and the line search's scalars live on the device: a relaxation is one
 captured `wp.capture_while` loop, launched once, its result read once.
 """
 
@@ -48,7 +48,7 @@ METHODS = ("ncg", "newton", "auto")
 # a CG stop at the round-off floor within this factor of tol is the dtype's floor: Newton cannot help
 ROUND_OFF_SLACK = 10.0
 # Newton steps a finish may take: every step lowers the energy, and a snap-through to a distant
-# equilibrium took 132–137 (docs/shell.md "Newton finish")
+# equilibrium took 132–137 (docs/theory/shell.md#newton-finish)
 NEWTON_STEPS = 500
 
 

@@ -1,4 +1,4 @@
-"""Self-contact (ours; SPEC has none): keeps the layers of a folded or everted shell apart.
+"""Self-contact (ours; the paper has none): keeps the layers of a folded or everted shell apart.
 
     shell.self_contact = SelfContact(shell)             # d = h, pressure D/d³ at r = d/2
 
@@ -8,7 +8,7 @@ it, and so do relaxations. Pairs are candidates from a hash grid within (1 + ski
 before every relaxation (outside its captured loop). Inside the loop a trial step that takes a
 point half the skin from its place at the search is refused (its step halves), and once the
 accepted positions have moved a quarter skin the loop stops for a new search and goes on; so no
-pair within d is ever missed. Choices and measurements: docs/shell.md.
+pair within d is ever missed. Choices and measurements: docs/theory/shell.md.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class SelfContact:
     def _points(self, x: wp.array, out: wp.array) -> None:
         t = self.shell.tables
         wp.launch(quadrature_points_kernel, dim=t.n_quadrature_points,
-                  inputs=[x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle],
+                  inputs=[x, *t.patch()],
                   outputs=[out], device=self.shell.device)  # fmt: skip
 
     def search(self, x: wp.array) -> None:
@@ -126,7 +126,7 @@ class SelfContact:
                               shell._entry_triangle, t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
                       outputs=[forces], device=shell.device)  # fmt: skip
         else:
-            patch = [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle]
+            patch = t.patch()
             wp.launch(quadrature_spread_kernel, dim=n_q, inputs=[self.pressures, self.area, *patch], outputs=[forces],
                       device=shell.device)  # fmt: skip
 

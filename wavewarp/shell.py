@@ -1,4 +1,4 @@
-"""Koiter shell mechanics (SPEC §3, §9): energy, exact forces and quasi-static relaxation.
+"""Koiter shell mechanics (docs/theory/shell.md, docs/theory/scenes.md): energy, exact forces and quasi-static relaxation.
 
 `Shell` holds the static model on one device (patch tables, rest geometry ā⁰ and b̄⁰ at the
 quadrature points, moduli, V̄) and evaluates, for positions x and control concentrations c,
@@ -56,7 +56,7 @@ class KoiterReference:
         """Fill the shell's reference arrays at every quadrature point from control values c."""
         s = shell.scalar
         wp.launch(koiter_reference_kernel, dim=shell.tables.n_quadrature_points,
-                  inputs=[c, *shell.patch_inputs(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.AI)],
+                  inputs=[c, *shell.tables.weighted_patch(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.AI)],
                   outputs=shell.reference_arrays(), device=shell.device)  # fmt: skip
 
 
@@ -73,7 +73,7 @@ class BilayerReference:
     def launch(self, shell, c: wp.array) -> None:
         s = shell.scalar
         wp.launch(bilayer_reference_kernel, dim=shell.tables.n_quadrature_points,
-                  inputs=[c, *shell.patch_inputs(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.A)],
+                  inputs=[c, *shell.tables.weighted_patch(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.A)],
                   outputs=shell.reference_arrays(), device=shell.device)  # fmt: skip
 
 
@@ -209,11 +209,6 @@ class Shell:
     def _s(self, value) -> object:
         return self.scalar(value)
 
-    def patch_inputs(self) -> list:
-        """The patch tables a quadrature-point kernel gathers through, in the kernels' argument order."""
-        t = self.tables
-        return [t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle]
-
     def reference_arrays(self) -> list:
         """ā, ā⁻¹, b̄ and the reference area weight at every quadrature point."""
         return [self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight]
@@ -246,7 +241,7 @@ class Shell:
         """The volume moments [S, V₀, Σx] (kernels/shell.py `volume_kernel`) into self._moments:
         per-item terms and a fixed-order or differentiable sum, or one block-reducing pass."""
         t = self.tables
-        patch = [x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.weights, t.points_per_triangle]
+        patch = [x, *t.weighted_patch()]
         if differentiable or self.deterministic:
             wp.launch(volume_kernel, dim=len(self._moment_terms), inputs=patch + [0],
                       outputs=[self._moment_terms, self._moments], device=self.device)  # fmt: skip
@@ -259,9 +254,7 @@ class Shell:
     def _elastic_inputs(self, x: wp.array, moduli=None) -> list:
         t = self.tables
         stretching, bending = self._moduli if moduli is None else moduli
-        return [x, t.patch_start, t.patch_vertices, t.triangle_type, t.basis, t.points_per_triangle,
-                self.ref_metric, self.ref_metric_inv, self.ref_curvature, self.ref_weight,
-                self._s(stretching), self._s(bending), self._s(self.poisson)]  # fmt: skip
+        return [x, *t.patch(), *self.reference_arrays(), self._s(stretching), self._s(bending), self._s(self.poisson)]
 
     def energy_device(self, x: wp.array, energy: wp.array) -> None:
         """energy[0] = E(x) at the current reference (float64; differentiable with wp.Tape)."""
@@ -375,14 +368,14 @@ class Shell:
 
     def relax(self, x0, c=0.0, tol=None, max_iterations=20000, callback=None, method="auto",
               newton_steps=NEWTON_STEPS) -> np.ndarray:  # fmt: skip
-        """Quasi-static equilibrium from x0 under concentrations c (SPEC §3).
+        """Quasi-static equilibrium from x0 under concentrations c (docs/theory/shell.md).
 
         Stops when max_I |F_I| <= tol · Y h ℓ̄ (tol is a strain-like number; default 1e-5 in
         float32, ten times its measured round-off floor, and 1e-9 in float64). `method`: "ncg",
         preconditioned nonlinear conjugate gradients with an Armijo line search (at most
         `max_iterations`); "newton", Levenberg–Marquardt Newton steps on the sparse Hessian (at
         most `newton_steps`); "auto", CG, and Newton from where CG stopped if it spent its
-        budget (docs/shell.md). The energy falls monotonically. Raises RelaxationError saying how
+        budget (docs/theory/shell.md). The energy falls monotonically. Raises RelaxationError saying how
         far it got when it does not converge.
         """
         if tol is None:

@@ -1,4 +1,4 @@
-"""Loop subdivision (SPEC §2): the scheme's rules, the exact patch basis and patch extraction.
+"""Loop subdivision (docs/theory/geometry.md): the scheme's rules, the exact patch basis and patch extraction.
 
 * `loop_beta`, `limit_weight`: Loop's original vertex weight and the limit-position mask.
 * `loop_subdivide`: one step of Loop subdivision applied to any per-vertex data.

@@ -1,7 +1,7 @@
 """Half-edge connectivity of an oriented triangle mesh, built once in NumPy.
 
 `third(a, b)` answers "which vertex completes the triangle that traverses the directed
-edge a -> b counter-clockwise", the one query the patch extraction of SPEC §2 needs.
+edge a -> b counter-clockwise", the one query the patch extraction of docs/theory/geometry.md needs.
 Meshes with boundary are allowed here (the synthetic patches of `subdivision` have one);
 a missing half-edge returns -1.
 """

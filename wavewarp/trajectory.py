@@ -1,4 +1,4 @@
-"""HDF5 trajectories (SPEC §9): written atomically, frame by frame, and resumable.
+"""HDF5 trajectories (docs/theory/scenes.md): written atomically, frame by frame, and resumable.
 
 Schema: `/mesh/triangles` (T, 3), `/mesh/rest_positions` (V, 3); `/frames/time` (F,),
 `/frames/positions` (F, V, 3), `/frames/concentration` (F, V) and any further per-vertex

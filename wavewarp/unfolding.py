@@ -1,4 +1,4 @@
-"""Exact geodesic distances on the triangular prism by unfolding (SPEC §7, §8; paper Fig. 2).
+"""Exact geodesic distances on the triangular prism by unfolding (docs/theory/scenes.md; paper Fig. 2).
 
 On a convex polyhedron a shortest path meets every face in one straight piece (two visits to a
 convex face could be joined by the chord, which is shorter) and is therefore a straight segment

@@ -1,4 +1,4 @@
-"""USD animation output (SPEC §9): Z up, Loop subdivision scheme, time-sampled points and field.
+"""USD animation output (docs/theory/scenes.md): Z up, Loop subdivision scheme, time-sampled points and field.
 
 Viewers draw the same Loop limit surface the simulation uses, because the control mesh is
 authored with `subdivisionScheme = "loop"`. The file is written to a temporary sibling and
@@ -10,22 +10,14 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from matplotlib import colormaps
 
 from .io import atomic_path
 
-# viridis at 0, 1/4, 1/2, 3/4, 1 (matplotlib's table), interpolated linearly
-_VIRIDIS = np.array(
-    [[0.267, 0.005, 0.329], [0.229, 0.322, 0.546], [0.128, 0.567, 0.551], [0.369, 0.789, 0.383], [0.993, 0.906, 0.144]]
-)
-
-
-def colour_map(values, low: float, high: float) -> np.ndarray:
-    """(n, 3) viridis colours of `values` scaled from [low, high]."""
+def colour_map(values, low: float, high: float, name: str = "viridis") -> np.ndarray:
+    """(n, 3) RGB colours of `values` scaled from [low, high] by matplotlib's colormap `name`."""
     s = np.clip((np.asarray(values, dtype=np.float64) - low) / max(high - low, 1e-300), 0.0, 1.0)
-    position = s * (len(_VIRIDIS) - 1)
-    i = np.minimum(position.astype(int), len(_VIRIDIS) - 2)
-    f = (position - i)[:, None]
-    return (1 - f) * _VIRIDIS[i] + f * _VIRIDIS[i + 1]
+    return colormaps[name](s)[:, :3]
 
 
 class UsdAnimation:

@@ -1,4 +1,4 @@
-"""XDMF frames for ParaView (issue 5): the limit surface with per-frame concentration and displacement.
+"""XDMF frames for ParaView: the limit surface with per-frame concentration and displacement.
 
 meshio's time-series writer stores the mesh once (the rest limit points), so motion is the point
 field `displacement` (limit points minus rest limit points; ParaView: "Warp By Vector"), next to
