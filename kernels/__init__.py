@@ -15,6 +15,11 @@ def _element(role: str, scalar):
     }[role]
 
 
+def scalar_of(array: wp.array):
+    """The scalar type of an array's elements (float32 or float64, of scalars, vectors or matrices)."""
+    return getattr(array.dtype, "_wp_scalar_type_", array.dtype)
+
+
 def declare_overloads(kernel, **roles):
     """Register a generic kernel's float32 and float64 overloads up front.
 

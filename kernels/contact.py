@@ -1,4 +1,4 @@
-"""External forces on the walkers (docs/theory/dynamics.md), one kernel per term.
+"""External forces on the walkers (docs/theory/dynamics.md), one kernel per term, each with its launcher.
 
 Gravity acts on the control points (exact: ∂/∂x_I of ρ g ∫ z dω̄⁰ is M_I g). Contact and
 friction act on the limit points p = L x with velocities u = L v (L the Loop limit mask) and
@@ -13,8 +13,8 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads
-from .limit_surface import basis_row, patch_scalar
+from . import declare_overloads, scalar_of
+from .limit_surface import basis_row, limit_motion_kernel, patch_scalar
 
 
 @wp.kernel
@@ -113,3 +113,34 @@ declare_overloads(limit_transpose_kernel, limit_forces="vec3[]", centre_weight="
                   forces="vec3[]")  # fmt: skip
 declare_overloads(quadrature_motion_kernel, x="vec3[]", v="vec3[]", basis="vec6[,]", p="vec3[]", u="vec3[]")
 declare_overloads(quadrature_spread_kernel, pressure="vec3[]", area="scalar[]", basis="vec6[,]", forces="vec3[]")
+
+
+# ---------------------------------------------------------------- launchers
+
+
+def eval_gravity(mass: wp.array, g: float, forces: wp.array) -> None:
+    """forces_I += -M_I g ẑ."""
+    wp.launch(gravity_kernel, dim=len(mass), inputs=[mass, scalar_of(mass)(g)], outputs=[forces], device=mass.device)
+
+
+def eval_ground(ground, x: wp.array, v: wp.array, mask, patch: list, rest_area, points: wp.array, velocities: wp.array,
+                normal_force: wp.array, point_forces: wp.array, forces: wp.array) -> None:  # fmt: skip
+    """Contact and friction of `ground` (a wavewarp.Ground) on the shell at x, v, added to the control points'
+    `forces`: on the limit points (`mask`, Loop's limit mask; "point") or as pressures on the quadrature
+    points (`patch` tables, `rest_area` dω̄⁰; "area"). `points`, `velocities`, `normal_force` and
+    `point_forces` are scratch over the ground's points."""
+    n, s, device = len(points), scalar_of(normal_force), x.device
+    ring = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight]
+    if ground.contact == "point":
+        wp.launch(limit_motion_kernel, dim=n, inputs=[x, v, *ring], outputs=[points, velocities], device=device)
+    else:
+        wp.launch(quadrature_motion_kernel, dim=n, inputs=[x, v, *patch], outputs=[points, velocities], device=device)
+    wp.launch(ground_contact_kernel, dim=n, inputs=[points, velocities, s(ground.stiffness), s(ground.damping)],
+              outputs=[normal_force, point_forces], device=device)  # fmt: skip
+    if ground.friction > 0:
+        wp.launch(friction_kernel, dim=n, inputs=[velocities, normal_force, s(ground.friction), s(ground.sharpness)],
+                  outputs=[point_forces], device=device)  # fmt: skip
+    if ground.contact == "point":
+        wp.launch(limit_transpose_kernel, dim=n, inputs=[point_forces, *ring], outputs=[forces], device=device)
+    else:
+        wp.launch(quadrature_spread_kernel, dim=n, inputs=[point_forces, rest_area, *patch], outputs=[forces], device=device)

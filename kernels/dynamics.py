@@ -1,12 +1,12 @@
 """Shell dynamics of the walkers (docs/theory/dynamics.md): symplectic Euler with lumped mass, or the
-overdamped mobility model (explicit Euler on M ζ v = F)."""
+overdamped mobility model (explicit Euler on M ζ v = F). Each kernel with its launcher (below)."""
 
 from typing import Any
 
 import warp as wp
 
-from . import declare_overloads
-from .reduce import block_add
+from . import declare_overloads, scalar_of
+from .reduce import REDUCTION_BLOCK, block_add
 
 
 @wp.kernel
@@ -168,3 +168,51 @@ declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3
 declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar",
                   trace="scalar[,]")  # fmt: skip
 declare_overloads(speed_runaway_kernel, v="vec3[]", limit="scalar")
+
+
+# ---------------------------------------------------------------- launchers
+
+
+def eval_rigid_correction(forces: wp.array, mass: wp.array, x: wp.array, v: wp.array, with_momentum: bool, threads: int,
+                          inverse_total_mass: float, sums: wp.array, second_moment: wp.array, rigid: wp.array) -> None:  # fmt: skip
+    """rigid: the rigid-body acceleration that removes the net force and torque of `forces` (their
+    round-off), and with_momentum the rigid velocity of the same momentum and angular momentum."""
+    device = x.device
+    wp.launch(rigid_sums_kernel, dim=threads, inputs=[forces, mass, x, v, int(with_momentum)],
+              outputs=[sums, second_moment], block_dim=REDUCTION_BLOCK, device=device)  # fmt: skip
+    wp.launch(rigid_correction_kernel, dim=1, inputs=[sums, second_moment, scalar_of(mass)(inverse_total_mass)],
+              outputs=[rigid], device=device)  # fmt: skip
+
+
+def integrate_symplectic_euler(forces, inverse_mass, rigid, damping: float, gravity: float, dt: float, x, v) -> None:
+    """v += dt (F/M - rigid - g ẑ - η (v - v_rigid)), then x += dt v."""
+    s = scalar_of(inverse_mass)
+    wp.launch(symplectic_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(damping), s(gravity), s(dt)],
+              outputs=[x, v], device=x.device)  # fmt: skip
+
+
+def integrate_overdamped_euler(forces, inverse_mass, rigid, inverse_drag: float, gravity: float, dt: float, x, v) -> None:
+    """v = (F/M - rigid - g ẑ) / ζ, x += dt v."""
+    s = scalar_of(inverse_mass)
+    wp.launch(overdamped_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(inverse_drag), s(gravity),
+                                                           s(dt)], outputs=[x, v], device=x.device)  # fmt: skip
+
+
+def eval_reference_ramp(start: wp.array, end: wp.array, fraction: float, out: wp.array) -> None:
+    """out = start + fraction (end - start)."""
+    wp.launch(reference_ramp_kernel, dim=len(out), inputs=[start, end, scalar_of(out)(fraction)], outputs=[out],
+              device=out.device)  # fmt: skip
+
+
+def eval_trace_row(mass, x, c, origin: int, threads: int, inverse_total_mass: float, moment, row, trace) -> None:
+    """trace[row] = [c_origin, centre of mass, x_origin], row += 1 (device only)."""
+    moment.zero_()
+    wp.launch(first_moment_kernel, dim=threads, inputs=[mass, x], outputs=[moment], block_dim=REDUCTION_BLOCK,
+              device=x.device)  # fmt: skip
+    wp.launch(trace_row_kernel, dim=1, inputs=[c, x, int(origin), moment, scalar_of(mass)(inverse_total_mass)],
+              outputs=[row, trace], device=x.device)  # fmt: skip
+
+
+def eval_speed_runaway(v: wp.array, limit: float, flag: wp.array) -> None:
+    """flag = 1 where some |v_I| passed `limit` or is NaN/Inf."""
+    wp.launch(speed_runaway_kernel, dim=len(v), inputs=[v, scalar_of(v)(limit)], outputs=[flag], device=v.device)

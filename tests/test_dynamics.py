@@ -313,6 +313,7 @@ def test_area_contact_is_the_pressure_law_on_the_quadrature_points(device, rng):
     assert run.contact_damping == pytest.approx(ground.damping / 2.0)  # β/ρ: max_J ∫ N_J dω̄⁰ / M_J = 1/ρ
 
 
+@pytest.mark.slow
 def test_area_contact_ball_settles_where_the_pressure_carries_its_weight():
     """At rest Σ_q F_n = W; the height matches the rigid ball's root of Σ_q k min(z_q + s, 0)² dω̄⁰_q = W,
     up to the elastic sag."""

@@ -84,7 +84,7 @@ def sphere_spectrum_error(level, discretization, mass):
     "discretization, mass, levels, order",
     [
         ("subdivision", "consistent", (3, 4), 4.0),
-        ("subdivision", "lumped", (4, 5), 2.0),  # pre-asymptotic below level 4 for l = 6
+        pytest.param("subdivision", "lumped", (4, 5), 2.0, marks=pytest.mark.slow),  # pre-asymptotic below level 4
         ("p1", "consistent", (3, 4), 2.0),
         ("p1", "lumped", (3, 4), 2.0),
     ],

@@ -97,7 +97,7 @@ def test_resumed_walker_continues_the_same_trajectory(tmp_path, capsys):
         assert b["frames/reaction_amount"][-1] == pytest.approx(a["frames/reaction_amount"][-1], rel=1e-12)
 
 
-@pytest.mark.parametrize("scene", ["sphere-walker", "prism-walker"])
+@pytest.mark.parametrize("scene", ["sphere-walker", pytest.param("prism-walker", marks=pytest.mark.slow)])
 def test_mirrored_origin_mirrors_the_walk(scene):
     """The meshes are mirror-symmetric in x (and in y, the plane holding the origin): started at
     the mirror image of the origin, the centre of mass follows the mirror image of its path, and

@@ -1,27 +1,21 @@
 """wavewarp: chemical waves on active elastic shells (Loop-subdivision Koiter shells in Warp)."""
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("wavewarp")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0+source"
-
-from .chemistry import FitzHughNagumoSolver, TelegraphSolver  # noqa: E402
-from .coupled import QuasiStatic, Walking  # noqa: E402
-from .driver import simulate  # noqa: E402
-from .dynamics import Ground, InertialSolver, OverdampedDynamics, OverdampedSolver, ShellDynamics  # noqa: E402
-from .geometry import LimitSurface, limit_positions, limit_surface, sample_points  # noqa: E402
-from .initial import gaussian_pulse, steady_front  # noqa: E402
-from .laplace import LaplaceBeltrami  # noqa: E402
-from .mesh import Mesh, cube, icosphere, load, prism, save  # noqa: E402
-from .model import Model, ModelBuilder  # noqa: E402
-from .modes import azimuthal_order, softest_modes  # noqa: E402
-from .relax import RelaxationError  # noqa: E402
-from .self_contact import SelfContact  # noqa: E402
-from .shell import BilayerReference, KoiterReference, Shell  # noqa: E402
-from .state import State  # noqa: E402
-from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, TimeStepError  # noqa: E402
+from .version import __version__  # noqa: F401
+from .chemistry import FitzHughNagumoSolver, TelegraphSolver
+from .coupled import QuasiStatic, Walking
+from .driver import simulate
+from .dynamics import Ground, InertialSolver, OverdampedDynamics, OverdampedSolver, ShellDynamics
+from .geometry import LimitSurface, limit_positions, limit_surface, sample_points
+from .initial import gaussian_pulse, steady_front
+from .laplace import LaplaceBeltrami
+from .mesh import Mesh, cube, icosphere, load, prism, save
+from .model import Model, ModelBuilder
+from .modes import azimuthal_order, softest_modes
+from .relax import RelaxationError
+from .self_contact import SelfContact
+from .shell import BilayerReference, KoiterReference, Shell
+from .state import State
+from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, TimeStepError
 
 __all__ = [
     "BilayerReference", "BlowUpError", "FitzHughNagumo", "FitzHughNagumoSolver", "Ground", "InertialSolver",

@@ -21,14 +21,14 @@ import warp as wp
 
 from .checks import count, finite, positive
 from .kernels.waves import (
-    fhn_explicit_kernel,
-    fhn_imex_rhs_kernel,
-    fhn_inhibitor_kernel,
-    flip_kernel,
-    runaway_kernel,
-    telegraph_kernel,
-    telegraph_recentre_kernel,
-    transport_kernel,
+    eval_fhn_explicit,
+    eval_fhn_imex_rhs,
+    eval_fhn_inhibitor,
+    eval_flip,
+    eval_runaway,
+    eval_telegraph,
+    eval_telegraph_recentre,
+    eval_transport,
 )
 from .laplace import LaplaceBeltrami
 from .shifted_solve import ShiftedMassSolver
@@ -115,8 +115,7 @@ class ChemistrySolver(ABC):
         self.operator.update(x)
         if conservative:
             for values in self.transported(state):
-                wp.launch(transport_kernel, dim=len(values), inputs=[self._old_mass, self.operator.mass_device],
-                          outputs=[values], device=self.device)  # fmt: skip
+                eval_transport(self._old_mass, self.operator.mass_device, values)
 
     # ---------------------------------------------------------------- pieces of a step
     def diffusion_acceleration(self, c: wp.array) -> None:
@@ -128,8 +127,7 @@ class ChemistrySolver(ABC):
         """Launch the runaway checks of the watched arrays into `flag`; return a message for failures
         found otherwise (FHN IMEX: its CG missed the tolerance), else None."""
         for values in self.watched(state):
-            wp.launch(runaway_kernel, dim=len(values), inputs=[values, self.scalar(limit)], outputs=[self.flag],
-                      device=self.device)  # fmt: skip
+            eval_runaway(values, limit, self.flag)
         return None
 
     @staticmethod
@@ -181,18 +179,12 @@ class TelegraphSolver(ChemistrySolver):
     def step(self, state_in: State, state_out: State, dt: float) -> None:
         self._copy_fields(state_in, state_out)
         self.diffusion_acceleration(state_out.c)
-        s = self.scalar
-        wp.launch(telegraph_kernel, dim=len(state_out.c),
-                  inputs=[self.acceleration, s(self.gamma**2), s(0.5 * self.alpha * dt), s(dt)],
-                  outputs=[state_out.c, state_out.rate], device=self.device)  # fmt: skip
+        eval_telegraph(self.acceleration, self.gamma, self.alpha, dt, state_out.c, state_out.rate)
 
     def recentre(self, state: State, old: float, new: float) -> None:
         """Move the half-step rate from t_n - old/2 to t_n - new/2 (a change of dt): the variable-step leapfrog."""
         self.diffusion_acceleration(state.c)
-        s = self.scalar
-        wp.launch(telegraph_recentre_kernel, dim=len(state.rate),
-                  inputs=[self.acceleration, s(self.gamma**2), s(self.alpha), s(0.5 * (old - new))],
-                  outputs=[state.rate], device=self.device)  # fmt: skip
+        eval_telegraph_recentre(self.acceleration, self.gamma, self.alpha, old, new, state.rate)
 
     def transported(self, state: State) -> list:
         return [state.c, state.rate]
@@ -292,22 +284,17 @@ class FitzHughNagumoSolver(ChemistrySolver):
 
     def step(self, state_in: State, state_out: State, dt: float) -> None:
         self._copy_fields(state_in, state_out)
-        s, c, w, h = self.scalar, state_out.c, state_out.w, state_out.history
+        c, w, h = state_out.c, state_out.w, state_out.history
         if self.implicit:
-            wp.launch(fhn_imex_rhs_kernel, dim=len(c), inputs=[c, w, self.operator.mass_device, s(self.nu), s(dt)],
-                      outputs=[self._rhs, h["produced"]], device=self.device)  # fmt: skip
+            eval_fhn_imex_rhs(c, w, self.operator.mass_device, self.nu, dt, self._rhs, h["produced"])
             self.cg.solve(self._rhs, c)
-            wp.launch(fhn_inhibitor_kernel, dim=len(c), inputs=[c, s(self.epsilon), s(self.kappa), s(dt)], outputs=[w],
-                      device=self.device)  # fmt: skip
+            eval_fhn_inhibitor(c, self.epsilon, self.kappa, dt, w)
         else:
             self.diffusion_acceleration(c)
-            wp.launch(fhn_explicit_kernel, dim=len(c),
-                      inputs=[self.acceleration, self.operator.mass_device, s(self.gamma**2), s(self.nu), s(self.kappa),
-                              s(self.epsilon), s(dt)],
-                      outputs=[c, w, h["produced"]], device=self.device)  # fmt: skip
-        wp.launch(flip_kernel, dim=len(c), inputs=[c, s(self.flip_floor), s(FLIP_HOLD), FLIP_STEPS],
-                  outputs=[h["previous"], h["increment"], h["earlier"], h["streak"], self.flag],
-                  device=self.device)  # fmt: skip
+            eval_fhn_explicit(self.acceleration, self.operator.mass_device, self.gamma, self.nu, self.kappa, self.epsilon,
+                              dt, c, w, h["produced"])  # fmt: skip
+        eval_flip(c, self.flip_floor, FLIP_HOLD, FLIP_STEPS, h["previous"], h["increment"], h["earlier"], h["streak"],
+                  self.flag)  # fmt: skip
 
     def launch_checks(self, state: State, limit: float) -> str | None:
         super().launch_checks(state, limit)

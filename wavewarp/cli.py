@@ -14,7 +14,7 @@ import warp as wp
 
 from wavewarp.benchmarks import NAMES as BENCHMARKS
 
-from . import __version__
+from .version import __version__
 from .driver import simulate, stored_frames
 from .geometry import limit_positions
 from .io import check_writable

@@ -26,7 +26,7 @@ import warp as wp
 from . import kernels
 from .checks import count
 from .dynamics import ShellDynamics
-from .kernels.dynamics import reference_ramp_kernel
+from .kernels.dynamics import eval_reference_ramp
 from .relax import NEWTON_STEPS, ROUND_OFF_SLACK, RelaxationError, checked_method, relax
 from .runner import GuardedRunner
 from .shell import Shell
@@ -192,8 +192,7 @@ class Walking:
             self.shell.update_reference(wave.c)
         for k in range(1, self.substeps + 1):
             if self.ramp:
-                wp.launch(reference_ramp_kernel, dim=len(self._c_ramp), inputs=[self._c_start, wave.c,
-                          self.shell.scalar(k / self.substeps)], outputs=[self._c_ramp])  # fmt: skip
+                eval_reference_ramp(self._c_start, wave.c, k / self.substeps, self._c_ramp)
                 self.shell.update_reference(self._c_ramp)
             dynamics.solver.step(dynamics.state, dynamics.state, dynamics.dt)
         if self.sensitive:

@@ -40,25 +40,14 @@ from .kernels import dynamics as kernels_dynamics
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import reduce as kernels_reduce
 from .kernels import shell as kernels_shell
-from .kernels.contact import (
-    friction_kernel,
-    gravity_kernel,
-    ground_contact_kernel,
-    limit_transpose_kernel,
-    quadrature_motion_kernel,
-    quadrature_spread_kernel,
-)
+from .kernels.contact import eval_gravity, eval_ground
 from .kernels.dynamics import (
-    first_moment_kernel,
-    overdamped_euler_kernel,
-    rigid_correction_kernel,
-    rigid_sums_kernel,
-    speed_runaway_kernel,
-    symplectic_euler_kernel,
-    trace_row_kernel,
+    eval_rigid_correction,
+    eval_speed_runaway,
+    eval_trace_row,
+    integrate_overdamped_euler,
+    integrate_symplectic_euler,
 )
-from .kernels.limit_surface import limit_motion_kernel
-from .kernels.reduce import REDUCTION_BLOCK
 from .laplace import LaplaceBeltrami
 from .runner import GuardedRunner
 from .shell import Shell
@@ -136,8 +125,8 @@ class InertialSolver:
             self._limit_v = wp.zeros(points, dtype=self.vec3)
             self._limit_forces = wp.zeros(points, dtype=self.vec3)
             self._normal_force = wp.zeros(points, dtype=self.scalar)
-            if points != n:
-                self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"]  # dω̄⁰ at each point
+            # dω̄⁰ at each quadrature point (area contact)
+            self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"] if points != n else None
             self.flag = wp.zeros(1, dtype=wp.int32)
         self.contact_damping = self._contact_damping()
 
@@ -200,75 +189,48 @@ class InertialSolver:
         return math.sqrt(max(float(eigenvalue), 1e-300))
 
     # ---------------------------------------------------------------- stepping
-    def _contact_forces(self, x: wp.array, v: wp.array) -> None:
-        """Contact and friction on the limit points, reaching the control points through Lᵀ (or, for the
-        area contact, as pressures on the quadrature points, spread back with the basis)."""
+    def contact_forces(self, x: wp.array, v: wp.array) -> None:
+        """Contact and friction at x, v added to the solver's force buffer: on the limit points, reaching the control
+        points through Lᵀ (or, for the area contact, as pressures on the quadrature points, spread back)."""
         if self.ground is None:
             return
-        m, n, s, g, t = self.mask, len(self._limit_x), self.scalar, self.ground, self.shell.tables
-        patch = t.patch()
-        if g.contact == "point":
-            wp.launch(limit_motion_kernel, dim=n, inputs=[x, v, m.ring_start, m.ring, m.centre_weight, m.ring_weight],
-                      outputs=[self._limit_x, self._limit_v])  # fmt: skip
-        else:
-            wp.launch(quadrature_motion_kernel, dim=n, inputs=[x, v, *patch], outputs=[self._limit_x, self._limit_v])
-        wp.launch(ground_contact_kernel, dim=n, inputs=[self._limit_x, self._limit_v, s(g.stiffness), s(g.damping)],
-                  outputs=[self._normal_force, self._limit_forces])  # fmt: skip
-        if g.friction > 0:
-            wp.launch(friction_kernel, dim=n, inputs=[self._limit_v, self._normal_force, s(g.friction), s(g.sharpness)],
-                      outputs=[self._limit_forces])  # fmt: skip
-        if g.contact == "point":
-            wp.launch(limit_transpose_kernel, dim=n, inputs=[self._limit_forces, m.ring_start, m.ring, m.centre_weight,
-                                                             m.ring_weight], outputs=[self._forces])  # fmt: skip
-        else:
-            wp.launch(quadrature_spread_kernel, dim=n, inputs=[self._limit_forces, self._rest_area, *patch],
-                      outputs=[self._forces])  # fmt: skip
+        eval_ground(self.ground, x, v, self.mask, self.shell.tables.patch(), self._rest_area,
+                    self._limit_x, self._limit_v, self._normal_force, self._limit_forces, self._forces)  # fmt: skip
 
     def step(self, state_in: State, state_out: State, dt: float) -> None:
         """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration)."""
         if state_out is not state_in:
             wp.copy(state_out.x, state_in.x)
             wp.copy(state_out.v, state_in.v)
-        x, v, s = state_out.x, state_out.v, self.scalar
+        x, v = state_out.x, state_out.v
         with wp.ScopedDevice(self.device):
             self.shell.forces_device(x, self._forces)
-            wp.launch(rigid_sums_kernel, dim=self._reduction_threads, inputs=[self._forces, self._mass, x, v, int(self.damping > 0)],
-                      outputs=[self._rigid_sums, self._second_moment], block_dim=REDUCTION_BLOCK)  # fmt: skip
-            wp.launch(rigid_correction_kernel, dim=1, inputs=[self._rigid_sums, self._second_moment, s(1.0 / self.total_mass)],
-                      outputs=[self._rigid])  # fmt: skip
-            self._contact_forces(x, v)
+            eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self._reduction_threads,
+                                  1.0 / self.total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+            self.contact_forces(x, v)
             self._integrate(x, v, dt)
 
     def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
-        s = self.scalar
-        wp.launch(symplectic_euler_kernel, dim=len(self.mass),
-                  inputs=[self._forces, self._inverse_mass, self._rigid, s(self.damping), s(self.gravity), s(dt)],
-                  outputs=[x, v])  # fmt: skip
+        integrate_symplectic_euler(self._forces, self._inverse_mass, self._rigid, self.damping, self.gravity, dt, x, v)
 
     def launch_checks(self, state: State, limit: float) -> None:
         """flag = 1 where some |v_I| passed `limit` or is NaN/Inf (read by the caller)."""
         self.flag.zero_()
-        wp.launch(speed_runaway_kernel, dim=len(self.mass), inputs=[state.v, self.scalar(limit)], outputs=[self.flag],
-                  device=self.device)  # fmt: skip
+        eval_speed_runaway(state.v, limit, self.flag)
 
     # ---------------------------------------------------------------- measurements
     def launch_trace_row(self, state: State, c: wp.array, origin: int, row: wp.array, trace: wp.array) -> None:
         """Device only (capturable): trace[row] = [c_origin, centre of mass, x_origin], row += 1."""
-        self._first_moment.zero_()
-        wp.launch(first_moment_kernel, dim=self._reduction_threads, inputs=[self._mass, state.x],
-                  outputs=[self._first_moment], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
-        wp.launch(trace_row_kernel, dim=1, inputs=[c, state.x, int(origin), self._first_moment,
-                                                   self.scalar(1.0 / self.total_mass)],
-                  outputs=[row, trace], device=self.device)  # fmt: skip
+        eval_trace_row(self._mass, state.x, c, origin, self._reduction_threads, 1.0 / self.total_mass,
+                       self._first_moment, row, trace)  # fmt: skip
 
     def external_forces(self, state: State) -> np.ndarray:
         """(V, 3) gravity, contact and friction forces on the control points at `state`."""
         with wp.ScopedDevice(self.device):
             self._forces.zero_()
             if self.gravity > 0:
-                wp.launch(gravity_kernel, dim=len(self.mass), inputs=[self._mass, self.scalar(self.gravity)],
-                          outputs=[self._forces])  # fmt: skip
-            self._contact_forces(state.x, state.v)
+                eval_gravity(self._mass, self.gravity, self._forces)
+            self.contact_forces(state.x, state.v)
         return self._forces.numpy().astype(np.float64)
 
     def normal_forces(self, state: State) -> np.ndarray:
@@ -327,10 +289,7 @@ class OverdampedSolver(InertialSolver):
         return f"dt < 2ζ/ω², ζ = {self.drag:.6g}"
 
     def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
-        s = self.scalar
-        wp.launch(overdamped_euler_kernel, dim=len(self.mass),
-                  inputs=[self._forces, self._inverse_mass, self._rigid, s(1.0 / self.drag), s(self.gravity), s(dt)],
-                  outputs=[x, v])  # fmt: skip
+        integrate_overdamped_euler(self._forces, self._inverse_mass, self._rigid, 1.0 / self.drag, self.gravity, dt, x, v)
 
 
 class ShellDynamics:

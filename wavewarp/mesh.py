@@ -18,6 +18,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from .checks import positive
+from .io import atomic_path
 from .subdivision import limit_weight, loop_subdivide
 from .topology import Topology, unique_keys
 
@@ -558,8 +559,6 @@ def load(path, *, weld: bool = True, reorder: bool = True) -> Mesh:
 def save(mesh: Mesh, path) -> None:
     """Write `mesh` to any format meshio writes (chosen by the extension), atomically."""
     import meshio
-
-    from .io import atomic_path
 
     path = os.fspath(path)
     with atomic_path(path) as tmp:

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
 
+from .laplace import LaplaceBeltrami
 from .newton import NewtonFinish, ShiftedInverse, rigid_modes
 
 SHIFT = 1e-3  # the first σ: −SHIFT × the mean diagonal of M⁻¹H, below the softest modes of the shells we meet
@@ -30,8 +31,6 @@ class Modes:
 def softest_modes(shell, x, c=0.0, count: int = 6) -> Modes:
     """The `count` smallest eigenpairs of the shell's Hessian at positions x under concentrations c
     (docs/theory/shell.md energies), rigid motions removed; x should be an equilibrium (Shell.relax)."""
-    from .laplace import LaplaceBeltrami
-
     if shell.self_contact is not None:
         raise ValueError("softest_modes: self-contact is not in the Hessian; build the shell with self_contact=None")
     largest = 3 * shell.mesh.n_vertices - 7  # eigsh needs count < n, less the six rigid motions

@@ -167,8 +167,7 @@ class QuasiStaticWaveRun(WaveClock):
 
     def frame(self) -> dict:
         """The current frame: control positions, concentrations and the wave's rate c_t (control values)."""
-        frame = {"positions": self.coupled.positions(), "concentration": self.wave.concentration(),
-                 "concentration_rate": self.wave.velocity()}  # fmt: skip
+        frame = self.coupled.state.to_frame()
         if self.adaptive:
             frame["chemistry_dt"] = np.array(self.wave.dt)
         return frame
@@ -221,9 +220,8 @@ class QuasiStaticWaveRun(WaveClock):
 
     def restore(self, frame: dict) -> None:
         """Continue from a saved frame (HDF5 resume): positions, c, c_t, the time and (adaptive) dt."""
+        self.coupled.state.assign_frame(frame)
         self.coupled.restore(frame["positions"])
-        self.wave.state.set("c", frame["concentration"])
-        self.wave.state.set("rate", frame["concentration_rate"])
         if self.adaptive:
             if float(frame["chemistry_dt"]) != self.wave.dt:
                 self._change_dt(float(frame["chemistry_dt"]), recentre=False)  # c_t already belongs to it

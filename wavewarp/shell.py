@@ -39,6 +39,7 @@ from .kernels.shell import (
 )
 from .mesh import Mesh
 from .relax import NEWTON_STEPS, relax
+from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
@@ -198,8 +199,6 @@ class Shell:
 
     @self_contact.setter
     def self_contact(self, term) -> None:
-        from .self_contact import SelfContact
-
         if term is not None and (not isinstance(term, SelfContact) or term.shell is not self):
             raise ValueError("self_contact must be None or a SelfContact built for this shell")
         self._self_contact = term

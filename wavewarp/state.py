@@ -15,6 +15,8 @@ import numpy as np
 import warp as wp
 
 FIELDS = ("x", "v", "c", "rate", "w")
+# each field's series in an HDF5 trajectory's frames (wavewarp/trajectory.py)
+SERIES = {"x": "positions", "v": "velocities", "c": "concentration", "rate": "concentration_rate", "w": "inhibitor"}
 
 
 class State:
@@ -44,6 +46,19 @@ class State:
     def numpy(self, name: str) -> np.ndarray:
         """A field as float64 NumPy (x, v: (V, 3); c, rate, w: (V,))."""
         return getattr(self, name).numpy().astype(np.float64)
+
+    def to_frame(self) -> dict:
+        """The state's fields as a trajectory frame: {series name: float64 NumPy} (positions, velocities,
+        concentration, concentration_rate, inhibitor: those the state holds)."""
+        return {series: self.numpy(name) for name, series in SERIES.items() if getattr(self, name) is not None}
+
+    def assign_frame(self, frame: dict) -> None:
+        """Set the fields the state holds from a trajectory frame (a resume), and `time` if the frame has it."""
+        for name, series in SERIES.items():
+            if getattr(self, name) is not None:
+                self.set(name, frame[series])
+        if "time" in frame:
+            self.time = float(frame["time"])
 
     def set(self, name: str, values) -> None:
         """Overwrite a field (or a history array) from NumPy values, converted to its dtype."""

@@ -24,6 +24,7 @@ import shutil
 import numpy as np
 
 from .io import atomic_path
+from .version import __version__
 
 
 def _check_frame(name: str, values: np.ndarray) -> None:
@@ -40,8 +41,6 @@ class TrajectoryWriter:
 
     def __init__(self, path, *, triangles, rest_positions, series: dict, scene: str, parameters: dict, device: str,
                  resume: bool = False):  # fmt: skip
-        from . import __version__
-
         if os.path.splitext(os.fspath(path))[1] not in (".h5", ".hdf5"):
             raise ValueError(f"HDF5 output {os.fspath(path)!r} must end in .h5 or .hdf5")
         self.path = os.fspath(path)

@@ -196,10 +196,8 @@ class WalkerRun(WaveClock):
         return np.array([self.wave.time, c, *(self.dynamics.mass @ x / self.dynamics.total_mass), *x[self.origin_vertex]])
 
     def frame(self) -> dict:
-        return {"positions": self.dynamics.positions(), "velocities": self.dynamics.velocities(),
-                "concentration": self.wave.concentration(), "inhibitor": self.wave.inhibitor(),
-                "reaction_amount": np.array(self.wave.produced()), "first_arrival": self.arrival.times(self.wave.dt),
-                "trace": self._frame_trace}  # fmt: skip
+        return {**self.coupled.state.to_frame(), "reaction_amount": np.array(self.wave.produced()),
+                "first_arrival": self.arrival.times(self.wave.dt), "trace": self._frame_trace}  # fmt: skip
 
     def _record_trace_row(self) -> None:
         self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self.origin_vertex, self._trace_row,
@@ -216,10 +214,7 @@ class WalkerRun(WaveClock):
 
     def restore(self, frame: dict) -> None:
         """Continue from a saved frame (HDF5 resume): positions, velocities, c, w, the reaction's amount and the time."""
-        self.dynamics.state.set("x", frame["positions"])
-        self.dynamics.state.set("v", frame["velocities"])
-        self.wave.state.set("c", frame["concentration"])
-        self.wave.state.set("w", frame["inhibitor"])
+        self.coupled.state.assign_frame(frame)
         self.wave.set_produced(float(frame["reaction_amount"]))
         self.wave.steps = int(round(frame["time"] / self.wave.dt))
         self.wave.time = self.wave.steps * self.wave.dt
