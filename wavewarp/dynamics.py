@@ -49,7 +49,7 @@ from .kernels.dynamics import (
     integrate_symplectic_euler,
 )
 from .laplace import LaplaceBeltrami
-from .runner import GuardedRunner
+from .runner import GuardedRunner, Stepper
 from .shell import Shell
 from .state import State
 from .waves import BlowUpError, TimeStepError
@@ -292,7 +292,7 @@ class OverdampedSolver(InertialSolver):
         integrate_overdamped_euler(self._forces, self._inverse_mass, self._rigid, 1.0 / self.drag, self.gravity, dt, x, v)
 
 
-class ShellDynamics:
+class ShellDynamics(Stepper):
     """Inertial dynamics of `shell`, ready to run: an `InertialSolver`, its state (x, v), the time step
     and a guarded runner.
 
@@ -310,9 +310,7 @@ class ShellDynamics:
                  **solver_options):  # fmt: skip
         self.solver = self.solver_type(shell, density=density, gravity=gravity, ground=ground, **solver_options)
         self.shell, self.ground, self.device, self.scalar = shell, ground, self.solver.device, self.solver.scalar
-        self.safety = positive("safety", safety)
-        if self.safety > 1:
-            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+        self.safety = self.checked_safety(safety)
         self.capture = bool(capture) and wp.get_device(self.device).is_cuda
         self.state = self.solver.state(x0, v0)
         c = np.zeros(shell.mesh.n_vertices) if c is None else shell.checked_concentrations(c)
@@ -328,7 +326,6 @@ class ShellDynamics:
         typical = self.solver.gravity * 1e3 * self.dt * self.runner.check_every + float(np.abs(v0).max()) + 1.0
         self.speed_limit = positive("speed_limit", speed_limit) if speed_limit is not None else 1e6 * typical
 
-    scheme = property(lambda self: self.solver.scheme)
     x = property(lambda self: self.state.x)
     v = property(lambda self: self.state.v)
     mass = property(lambda self: self.solver.mass)
@@ -337,9 +334,6 @@ class ShellDynamics:
     gravity = property(lambda self: self.solver.gravity)
     damping = property(lambda self: self.solver.damping)
     contact_damping = property(lambda self: self.solver.contact_damping)
-    check_every = property(lambda self: self.runner.check_every)
-    time = property(lambda self: self.state.time, lambda self, t: setattr(self.state, "time", float(t)))
-    steps = property(lambda self: self.state.steps, lambda self, n: setattr(self.state, "steps", int(n)))
 
     def notify_model_changed(self) -> None:
         """The shell's V̄ or terms changed: the captured steps are captured anew."""
@@ -374,16 +368,6 @@ class ShellDynamics:
     def _check(self, chunk: int):
         return self.runaway(self.time, chunk * self.dt)
 
-    def advance(self, steps: int = 1):
-        """Advance `steps` time steps on the device; returns self (BlowUpError: state restored)."""
-
-        def done(chunk):
-            self.state.steps += chunk
-            self.state.time += chunk * self.dt
-
-        self.runner.run(steps, done)
-        return self
-
     def runaway(self, time: float, duration: float) -> BlowUpError | None:
         """Read one flag: a BlowUpError (not raised) if some |v_I| passed `speed_limit` or is NaN/Inf,
         for the steps from `time` over `duration`; None when all is well."""
@@ -395,10 +379,6 @@ class ShellDynamics:
             f"{self.speed_limit:.3g}) with dt = {self.dt:.6g} (stability bound {self.stable_dt:.6g}); the state is "
             f"restored to t = {time:.6g}. Reduce dt", time, self.steps,
         )  # fmt: skip
-
-    def run_until(self, time: float):
-        """Advance by whole steps to the first step at or after `time`; returns self."""
-        return self.advance(max(0, math.ceil((finite("time", time) - self.time) / self.dt - 1e-9)))
 
     # ---------------------------------------------------------------- state (NumPy)
     def positions(self) -> np.ndarray:

@@ -10,9 +10,11 @@ ever left in the state. The only host round-trip is the check, once per chunk.
 
 from __future__ import annotations
 
+import math
+
 import warp as wp
 
-from .checks import count
+from .checks import count, finite, positive
 from .device import run_steps
 
 
@@ -60,3 +62,43 @@ class GuardedRunner:
             finished += chunk
             if done is not None:
                 done(chunk)
+
+
+class Stepper:
+    """What every ready-to-run stepper shares: a solver, its `state`, its time step `dt`, a `runner`
+    (GuardedRunner), `safety` (the fraction of the stability bound an automatic dt takes), and the
+    clock (`time`, `steps`: the state's). `refresh()` runs before steps (the chemistry re-checks dt on
+    a moved surface)."""
+
+    time = property(lambda self: self.state.time, lambda self, t: setattr(self.state, "time", float(t)))
+    steps = property(lambda self: self.state.steps, lambda self, n: setattr(self.state, "steps", int(n)))
+    check_every = property(lambda self: self.runner.check_every)
+    scheme = property(lambda self: self.solver.scheme)
+
+    @staticmethod
+    def checked_safety(safety) -> float:
+        safety = positive("safety", safety)
+        if safety > 1:
+            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+        return safety
+
+    def refresh(self) -> None:
+        """Prepare the next steps (nothing here)."""
+
+    def advance(self, steps: int = 1):
+        """Advance `steps` time steps on the device; returns self. A failed check raises its error with
+        the state restored to the chunk's start."""
+        self.refresh()
+
+        def done(chunk):
+            self.state.steps += chunk
+            self.state.time += chunk * self.dt
+
+        self.runner.run(steps, done)
+        return self
+
+    def run_until(self, time: float):
+        """Advance by whole steps to the first step at or after `time`; returns self."""
+        time = finite("time", time)
+        self.refresh()
+        return self.advance(max(0, math.ceil((time - self.time) / self.dt - 1e-9)))

@@ -21,7 +21,7 @@ from .chemistry import FLIP_STEPS, FitzHughNagumoSolver, TelegraphSolver
 from .kernels import laplace as kernels_laplace
 from .kernels import waves as kernels_waves
 from .kernels.waves import FLIP_FLOP
-from .runner import GuardedRunner
+from .runner import GuardedRunner, Stepper
 
 
 class BlowUpError(RuntimeError):
@@ -41,15 +41,13 @@ class TimeStepError(ValueError):
     """A fixed dt exceeds the method's stability bound (at construction, or after the surface moved)."""
 
 
-class _Stepper:
+class _Stepper(Stepper):
     """A chemistry solver with its state, its time step and a guarded runner."""
 
     def __init__(self, solver, *, dt, safety, check_dt, check_every, capture):
         self.solver = solver
         self.operator, self.device, self.scalar = solver.operator, solver.device, solver.scalar
-        self.safety = positive("safety", safety)
-        if self.safety > 1:
-            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+        self.safety = self.checked_safety(safety)
         self.check_dt = bool(check_dt)
         self._requested_dt = None if dt is None else positive("dt", dt)
         self.capture = bool(capture)
@@ -62,15 +60,11 @@ class _Stepper:
                                     check_every=check_every)  # fmt: skip
 
     # ---------------------------------------------------------------- the solver's names
-    scheme = property(lambda self: self.solver.scheme)
     bound_formula = property(lambda self: self.solver.bound_formula)
     mass_corrections = property(lambda self: self.solver.mass_corrections)
     transport = property(lambda self: self.solver.transport)
     largest_eigenvalue = property(lambda self: self.solver.largest_eigenvalue)
-    check_every = property(lambda self: self.runner.check_every)
     c = property(lambda self: self.state.c)
-    time = property(lambda self: self.state.time, lambda self, t: setattr(self.state, "time", float(t)))
-    steps = property(lambda self: self.state.steps, lambda self, n: setattr(self.state, "steps", int(n)))
 
     # ---------------------------------------------------------------- the time step
     @property
@@ -162,28 +156,6 @@ class _Stepper:
             self.time,
             self.steps,
         )
-
-    def advance(self, steps: int = 1):
-        """Advance `steps` time steps on the device; returns self.
-
-        Raises BlowUpError (state restored to the last good check) on NaN/Inf or values past
-        `blowup_limit`, its OscillationError on FHN's period-2 flip-flop, and TimeStepError when the
-        surface moved and a fixed dt now exceeds the bound.
-        """
-        self.refresh()
-
-        def done(chunk):
-            self.state.steps += chunk
-            self.state.time += chunk * self.dt
-
-        self.runner.run(steps, done)
-        return self
-
-    def run_until(self, time: float):
-        """Advance by whole steps to the first step at or after `time`; returns self."""
-        time = finite("time", time)
-        self.refresh()
-        return self.advance(max(0, math.ceil((time - self.time) / self.dt - 1e-9)))
 
     # ---------------------------------------------------------------- reading the state
     def concentration(self) -> np.ndarray:
