@@ -5,8 +5,9 @@ A `State` holds Warp arrays over the control vertices: positions `x` and velocit
 control concentrations `c`, their rate `rate` (the telegraph leapfrog's c_t at t − dt/2) or the
 inhibitor `w` (FitzHugh–Nagumo), and `history`: named arrays a solver carries from step to step
 (FitzHugh–Nagumo's flip detector and the amount its reaction has produced). Fields a run does not
-use are None. `time` and `steps` count the chemistry clock. Solvers advance it with
-`step(state_in, state_out, dt)`.
+use are None. Solvers advance the arrays with `step(state_in, state_out, dt)`, device work only (so
+a CUDA graph can capture it); `time` and `steps` count the chemistry clock, which the guarded runner
+(wavewarp/runner.py) advances after each chunk of steps.
 """
 
 from __future__ import annotations
