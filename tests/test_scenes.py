@@ -78,6 +78,7 @@ def assert_resumed_run_equals(capsys, scene, full, part, keep, older=()):
     with h5py.File(part, "r+") as f:
         for name in f["frames"]:
             f["frames"][name].resize((keep, *f["frames"][name].shape[1:]))
+        f["frames"].attrs["complete"] = keep
         stored = json.loads(f.attrs["parameters"])
         f.attrs["parameters"] = json.dumps({k: v for k, v in stored.items() if k not in older})
     code, _, err = run_cli(capsys, scene, "--device", "cpu", "--resume", "--h5", str(part), "--out",
@@ -86,6 +87,7 @@ def assert_resumed_run_equals(capsys, scene, full, part, keep, older=()):
     with h5py.File(full, "r") as a, h5py.File(part, "r") as b:
         for name in a["frames"]:
             np.testing.assert_allclose(b["frames"][name][...], a["frames"][name][...], rtol=0, atol=1e-12)
+        assert json.loads(b.attrs["measurements"]) == json.loads(a.attrs["measurements"])  # the bookkeeping too
 
 
 @pytest.fixture
@@ -189,7 +191,7 @@ def test_uniform_concentration_through_the_cli_reaches_the_closed_form_radius(tm
         (["ascidian", "--mesh", "missing.obj"], "cannot read mesh file"),
         (["ascidian", "--out", "/nonexistent/dir/a.usda"], "does not exist"),
         (["ascidian", "--out", "a.txt"], "must end in .usd"),
-        (["ascidian", "--resume"], "--resume needs --h5"),
+        (["ascidian", "--resume"], "--resume continues the trajectory 'ascidian_trajectory.h5', which does not exist"),
         (["buckling", "--set", "level=2"], "or --set self_contact=false"),  # too coarse for self-contact
     ],
 )

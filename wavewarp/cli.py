@@ -15,14 +15,14 @@ import warp as wp
 from wavewarp.benchmarks import NAMES as BENCHMARKS
 
 from .version import __version__
-from .driver import simulate, stored_frames
+from .driver import simulate
 from .geometry import limit_positions
 from .io import check_writable
 from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
 from .relax import RelaxationError
 from .render import render
-from .trajectory import TrajectoryWriter
+from .trajectory import TrajectoryWriter, read_frames, stored_parameters
 from .usd import UsdAnimation
 from .waves import BlowUpError
 from .xdmf import XdmfWriter
@@ -34,18 +34,16 @@ def _list(args) -> int:
     return 0
 
 
-def _parameters(module, args):
-    """The run's parameters: the scene's, or on --resume the ones stored in the trajectory."""
+def _parameters(module, args, h5: str):
+    """The run's parameters: the scene's, or on --resume the ones stored in the trajectory `h5`."""
     if not args.resume:
         return resolve(module.Parameters, getattr(module, "QUICK", {}) if args.quick else None, args.set)
-    if not args.h5 or not os.path.isfile(args.h5):
-        raise ValueError("--resume needs --h5 FILE.h5, an existing trajectory of this scene")
+    if not os.path.isfile(h5):
+        raise ValueError(f"--resume continues the trajectory {h5!r}, which does not exist: pass --h5 FILE.h5, the "
+                         "trajectory of the run to continue")  # fmt: skip
     if args.set:
-        raise ValueError(f"--set cannot be combined with --resume: the run continues with the parameters stored in {args.h5}")
-    import h5py
-
-    with h5py.File(args.h5, "r") as f:
-        return resumed(module.Parameters, json.loads(f.attrs["parameters"]))
+        raise ValueError(f"--set cannot be combined with --resume: the run continues with the parameters stored in {h5}")
+    return resumed(module.Parameters, stored_parameters(h5))
 
 
 def _scene_run(args) -> int:
@@ -55,17 +53,18 @@ def _scene_run(args) -> int:
     if args.help_parameters:
         print("\n".join(help_lines(module.Parameters)))
         return 0
-    p = _parameters(module, args)
     out = args.out or f"{module.NAME}.usda"
-    for path in [out] + [path for path in (args.h5, args.xdmf) if path]:
+    h5_path = args.h5 or f"{os.path.splitext(out)[0]}_trajectory.h5"
+    p = _parameters(module, args, h5_path)
+    for path in [out, h5_path] + ([args.xdmf] if args.xdmf else []):
         check_writable(path)
     if args.xdmf:
         if not args.xdmf.endswith(".xdmf"):
             raise ValueError(f"XDMF output {args.xdmf!r} must end in .xdmf")
         sidecar = os.path.splitext(args.xdmf)[0] + ".h5"
-        if args.h5 and os.path.abspath(sidecar) == os.path.abspath(args.h5):
+        if os.path.abspath(sidecar) == os.path.abspath(h5_path):
             raise ValueError(f"--xdmf {args.xdmf} keeps its data in {sidecar}, the --h5 file: choose another name")
-    replay = stored_frames(args.h5) if args.resume else ()
+    replay = read_frames(h5_path) if args.resume else ()
 
     def report(message):
         print(f"wavewarp run {module.NAME}: {message}", file=sys.stderr)
@@ -73,13 +72,10 @@ def _scene_run(args) -> int:
     run = module.build(p, mesh=load(args.mesh) if args.mesh else None, device=args.device, seed=args.seed, report=report)
     usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", field_range=run.field_range,
                        ground_size=getattr(run, "ground_size", 0.0))  # fmt: skip
-    writers, replay_writers = [usd], [usd]
-    h5 = None
-    if args.h5:
-        h5 = TrajectoryWriter(args.h5, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
-                              scene=module.NAME, parameters=run.resolved, device=str(run.shell.device),
-                              resume=args.resume)  # fmt: skip
-        writers.append(h5)
+    h5 = TrajectoryWriter(h5_path, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
+                          scene=module.NAME, parameters=run.resolved, device=str(run.shell.device),
+                          resume=args.resume)  # fmt: skip
+    writers, replay_writers = [usd, h5], [usd]
     if args.xdmf:
         device = run.operator.device
 
@@ -92,8 +88,8 @@ def _scene_run(args) -> int:
         replay_writers.append(xdmf)
     outcome = simulate(run, writers, progress=sys.stderr.isatty(), replay=replay, replay_writers=replay_writers,
                        figures_stem=os.path.splitext(out)[0],
-                       on_measured=None if h5 is None else h5.set_measurements)  # fmt: skip
-    outputs = [out] + [path for path in (args.h5, args.xdmf) if path] + outcome.figures
+                       on_measured=h5.set_measurements)  # fmt: skip
+    outputs = [out, h5_path] + ([args.xdmf] if args.xdmf else []) + outcome.figures
     summary = {"scene": module.NAME, "device": str(run.shell.device), "steps": run.steps, "frames": outcome.frames,
                "wall_time_s": time.perf_counter() - start, "outputs": outputs, "interrupted": outcome.interrupted,
                "stopped": outcome.failure, **outcome.measurements}  # fmt: skip
@@ -146,7 +142,8 @@ def parser() -> argparse.ArgumentParser:
     run = commands.add_parser("run", help="run a scene: USD animation (and HDF5 trajectory)")
     run.add_argument("scene", help="a scene name (wavewarp list) or the path of a scene script")
     run.add_argument("--out", default=None, help="USD file (default SCENE.usda)")
-    run.add_argument("--h5", default=None, help="HDF5 trajectory to write (or, with --resume, to continue)")
+    run.add_argument("--h5", default=None, help="HDF5 trajectory to write, frame by frame (or, with --resume, to continue); "
+                     "default OUT_trajectory.h5 beside the USD file")
     run.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scene parameter")
     run.add_argument("--parameters", dest="help_parameters", action="store_true",

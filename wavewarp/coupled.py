@@ -76,7 +76,8 @@ class QuasiStatic:
         self.unconverged = 0  # overdamped relaxations that used their whole iteration budget
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
         wave.state.x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
-        self.relax_iterations = []
+        self.relax_iterations = []  # per relaxation since construction or `restore_counters`
+        self.earlier_relaxations = (0, 0)  # (count, iterations) before a resume
         self.round_off_stops = 0  # relaxations accepted at the round-off floor, within ROUND_OFF_SLACK × tol
         self._equilibrate(initial=True)
 
@@ -109,6 +110,28 @@ class QuasiStatic:
             self.operator.update(x)
         elif self.sensitive:
             self.wave.move_surface(x)
+
+    def counters(self) -> dict:
+        """The run's bookkeeping so far, as whole numbers: relaxations and their CG iterations, the
+        unconverged, Newton-finished and round-off relaxations (stored per frame, for a resume)."""
+        count, iterations = self.earlier_relaxations
+        return {"relaxations": count + len(self.relax_iterations),
+                "relax_iterations": iterations + int(np.sum(self.relax_iterations, dtype=np.int64)),
+                "unconverged_relaxations": self.unconverged, "newton_finishes": self.newton_finishes,
+                "round_off_relaxations": self.round_off_stops}  # fmt: skip
+
+    def restore_counters(self, counters: dict) -> None:
+        """Continue the bookkeeping of `counters()` (a resumed run's)."""
+        self.relax_iterations = []
+        self.earlier_relaxations = (int(counters["relaxations"]), int(counters["relax_iterations"]))
+        self.unconverged = int(counters["unconverged_relaxations"])
+        self.newton_finishes = int(counters["newton_finishes"])
+        self.round_off_stops = int(counters["round_off_relaxations"])
+
+    def relax_iterations_mean(self) -> float:
+        """CG iterations per relaxation over the whole run."""
+        counters = self.counters()
+        return counters["relax_iterations"] / counters["relaxations"]
 
     def restore(self, x) -> None:
         """Set the equilibrium positions (resuming a run); the wave's operator follows if sensitive."""

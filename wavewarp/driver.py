@@ -15,7 +15,6 @@ run's state from the last one.
 from __future__ import annotations
 
 import contextlib
-import os
 import signal
 from dataclasses import dataclass, field
 
@@ -37,16 +36,6 @@ class Outcome:
     figures: list = field(default_factory=list)
     failure: str | None = None
     interrupted: bool = False
-
-
-def stored_frames(path) -> list:
-    """The frames of an HDF5 trajectory as (time, frame) pairs, oldest first."""
-    import h5py
-
-    with h5py.File(os.fspath(path), "r") as f:
-        series = {name: f["frames"][name][...] for name in f["frames"]}
-    times = series.pop("time")
-    return [(float(t), {name: values[k] for name, values in series.items()}) for k, t in enumerate(times)]
 
 
 def _terminate(signum, frame):

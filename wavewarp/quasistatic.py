@@ -96,6 +96,7 @@ class BoxParameters(TelegraphParameters):
 # ~1/6 of a CPU one against the same host factorization (docs/theory/shell.md)
 CG_BUDGET = {False: 2000, True: 20000}
 UNRESOLVED_MASS_GROWTH = 50.0  # a vertex's lumped mass over its rest value past which a blow-up is named a fold
+COUNTER = "count_"  # the prefix of the frames' bookkeeping series (relaxations, iterations, ...)
 
 
 class QuasiStaticWaveRun(WaveClock):
@@ -156,6 +157,7 @@ class QuasiStaticWaveRun(WaveClock):
         self.dt_changes = 0
         if self.adaptive:
             self.series["chemistry_dt"] = ()  # the step a frame's c_t belongs to (resume)
+        self.series.update({COUNTER + name: () for name in self._counters()})  # the bookkeeping, for a resume
         self.field_range = (0.0, 1.0)
         self.size = size
         self.origin = np.asarray(origin, dtype=np.float64)
@@ -170,7 +172,14 @@ class QuasiStaticWaveRun(WaveClock):
         frame = self.coupled.state.to_frame()
         if self.adaptive:
             frame["chemistry_dt"] = np.array(self.wave.dt)
+        frame.update({COUNTER + name: np.array(value) for name, value in self._counters().items()})
         return frame
+
+    def _counters(self) -> dict:
+        counters = {**self.coupled.counters(), "chemistry_dt_changes": self.dt_changes}
+        if self.shell.self_contact is not None:
+            counters["self_contact_searches"] = self.shell.self_contact.searches
+        return counters
 
     def advance_frame(self) -> None:
         """Coupled steps to the next multiple of the frame interval (within half a coupled step)."""
@@ -219,7 +228,8 @@ class QuasiStaticWaveRun(WaveClock):
         self.dt_changes += 1
 
     def restore(self, frame: dict) -> None:
-        """Continue from a saved frame (HDF5 resume): positions, c, c_t, the time and (adaptive) dt."""
+        """Continue from a saved frame (HDF5 resume): positions, c, c_t, the time, (adaptive) dt and the
+        bookkeeping."""
         self.coupled.state.assign_frame(frame)
         self.coupled.restore(frame["positions"])
         if self.adaptive:
@@ -227,9 +237,15 @@ class QuasiStaticWaveRun(WaveClock):
                 self._change_dt(float(frame["chemistry_dt"]), recentre=False)  # c_t already belongs to it
             self.wave.time = float(frame["time"])
             self.wave.steps = int(round(self.wave.time / self.base_dt))
-            return
-        self.wave.steps = int(round(frame["time"] / self.wave.dt))
-        self.wave.time = self.wave.steps * self.wave.dt
+        else:
+            self.wave.steps = int(round(frame["time"] / self.wave.dt))
+            self.wave.time = self.wave.steps * self.wave.dt
+        stored = {name[len(COUNTER):]: value for name, value in frame.items() if name.startswith(COUNTER)}
+        if stored and np.isfinite(list(stored.values())).all():  # files from before the bookkeeping: afresh
+            self.coupled.restore_counters(stored)
+            self.dt_changes = int(stored["chemistry_dt_changes"])
+            if self.shell.self_contact is not None:
+                self.shell.self_contact.searches = int(stored["self_contact_searches"])
 
     def record(self, time: float, frame: dict, stored: bool = False) -> None:
         """Note a written frame for the figures (and, for frames read back on resume, the arrival times)."""
@@ -246,7 +262,7 @@ class QuasiStaticWaveRun(WaveClock):
     def measurements(self) -> dict:
         x = self.coupled.positions()
         out = {"time": self.time, "volume": self.shell.volume(x),
-               "relax_iterations_mean": float(np.mean(self.coupled.relax_iterations)),
+               "relax_iterations_mean": self.coupled.relax_iterations_mean(),
                "unconverged_relaxations": self.coupled.unconverged,
                "newton_finishes": self.coupled.newton_finishes,
                "round_off_relaxations": self.coupled.round_off_stops, **self.balance.measurements()}  # fmt: skip

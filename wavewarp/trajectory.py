@@ -10,21 +10,25 @@ root attributes `scene`, `parameters` (JSON), `wavewarp_version`, `device`, and 
 run `measurements` (JSON) plus each numeric measurement under its own name (walkers: `period`,
 `distance_R`, `speed_R_per_T`, ...).
 
-Frames go to a temporary sibling that replaces the target when the writer closes, also after
-Ctrl-C (the frames so far are kept); any other error removes it and leaves the target as it
-was. `resume=True` continues an existing file: its frames are copied and new ones appended.
+Durable frame by frame: a new file is created as a temporary sibling and renamed into place with
+its first frame (an error before it leaves any older file untouched); from then on each frame is
+appended in place, counted in the `/frames` attribute `complete` and synced to disk, so after a
+kill -9 or a power cut the file holds every completed frame and `resume=True` continues it
+(`frames` beyond `complete`, half-written when the process died, are cut first).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
 
+import h5py
 import numpy as np
 
-from .io import atomic_path
+from .io import check_writable, move_into_place, remove_stale_temporaries, temporary_file
 from .version import __version__
+
+COMPLETE = "complete"  # the /frames attribute: how many frames are whole
 
 
 def _check_frame(name: str, values: np.ndarray) -> None:
@@ -53,24 +57,32 @@ class TrajectoryWriter:
         self.frames = 0
 
     def __enter__(self) -> TrajectoryWriter:
-        import h5py
-
-        self._atomic = atomic_path(self.path)
-        self._tmp = self._atomic.__enter__()
-        try:
-            if self.resume:
-                shutil.copyfile(self.path, self._tmp)
-                self.file = h5py.File(self._tmp, "r+")
+        self._pending = None
+        if self.resume:
+            check_writable(self.path)
+            remove_stale_temporaries(self.path)
+            try:
+                self.file = h5py.File(self.path, "r+")
+            except OSError as error:
+                raise ValueError(f"cannot resume {self.path!r}: not a readable HDF5 trajectory ({error})") from None
+            try:
                 self._check_resumable()
-                self.frames = len(self.file["frames/time"])
+                self.frames = complete_frames(self.file)
+                for name in self.file["frames"]:  # a frame half-written when the process died
+                    dataset = self.file["frames"][name]
+                    dataset.resize((self.frames, *dataset.shape[1:]))
+                for name in set(self.series) - set(self.file["frames"]):  # a series newer than the file: NaN before
+                    self._create_series(name, self.frames)
                 self.file.attrs["parameters"] = self.attributes["parameters"]
                 self.file.attrs["device"] = self.attributes["device"]
-            else:
-                self.file = h5py.File(self._tmp, "w")
-                self._create()
-        except BaseException as error:
-            self._atomic.__exit__(type(error), error, error.__traceback__)
-            raise
+                self._sync()
+            except BaseException:
+                self.file.close()
+                raise
+        else:
+            self._pending = temporary_file(self.path)
+            self.file = h5py.File(self._pending, "w")
+            self._create()
         return self
 
     def _create(self) -> None:
@@ -80,9 +92,13 @@ class TrajectoryWriter:
         f.create_dataset("mesh/triangles", data=self.triangles)
         f.create_dataset("mesh/rest_positions", data=self.rest_positions)
         f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype=np.float64, chunks=(256,))
-        for name, shape in self.series.items():
-            f.create_dataset(f"frames/{name}", shape=(0, *shape), maxshape=(None, *shape), dtype=np.float64,
-                             chunks=(1, *shape))  # fmt: skip
+        for name in self.series:
+            self._create_series(name, 0)
+
+    def _create_series(self, name: str, frames: int) -> None:
+        shape = self.series[name]
+        self.file.create_dataset(f"frames/{name}", shape=(frames, *shape), maxshape=(None, *shape), dtype=np.float64,
+                                 chunks=(1, *shape), fillvalue=np.nan)  # fmt: skip
 
     def _check_resumable(self) -> None:
         f = self.file
@@ -92,9 +108,10 @@ class TrajectoryWriter:
         if not np.array_equal(f["mesh/triangles"][...], self.triangles):
             raise ValueError(f"cannot resume {self.path!r}: its mesh differs from this run's (same --mesh and level?)")
         for name, shape in self.series.items():
-            if f"frames/{name}" not in f or f[f"frames/{name}"].shape[1:] != shape:
-                raise ValueError(f"cannot resume {self.path!r}: frames/{name} is missing or has another shape")
-        if len(f["frames/time"]) == 0:
+            if f"frames/{name}" in f and f[f"frames/{name}"].shape[1:] != shape:
+                raise ValueError(f"cannot resume {self.path!r}: frames/{name} has the shape "
+                                 f"{f[f'frames/{name}'].shape[1:]}, this run's is {shape}")  # fmt: skip
+        if complete_frames(f) == 0:
             raise ValueError(f"cannot resume {self.path!r}: it has no frames")
 
     def add_frame(self, time: float, frame: dict) -> None:
@@ -112,8 +129,19 @@ class TrajectoryWriter:
             dataset = self.file[f"frames/{name}"]
             dataset.resize((n, *dataset.shape[1:]))
             dataset[n - 1] = array
-        self.file.flush()
+        self.file["frames"].attrs[COMPLETE] = n
+        self._sync()
         self.frames = n
+        if self._pending is not None:  # the first frame: the file takes its name
+            self.file.close()
+            move_into_place(self._pending, self.path)
+            self._pending = None
+            self.file = h5py.File(self.path, "r+")
+
+    def _sync(self) -> None:
+        """Flush HDF5's buffers and the operating system's: the frames so far survive a power cut."""
+        self.file.flush()
+        os.fsync(self.file.id.get_vfd_handle())
 
     def set_measurements(self, measured: dict) -> None:
         """Root attributes: `measurements` (JSON) and each numeric measurement by name."""
@@ -122,25 +150,43 @@ class TrajectoryWriter:
             if isinstance(value, (bool, int, float)) or (isinstance(value, list) and value and all(
                     isinstance(v, (int, float)) for v in value)):  # fmt: skip
                 self.file.attrs[name] = value
-        self.file.flush()
+        self._sync()
 
     def __exit__(self, kind, error, trace) -> bool:
         self.file.close()
-        keep = kind is None or (issubclass(kind, KeyboardInterrupt) and self.frames > 0)
-        if keep:
-            self._atomic.__exit__(None, None, None)
-        else:
-            self._atomic.__exit__(kind or RuntimeError, error, trace)
+        if self._pending is not None:  # no frame written: nothing replaces the target
+            os.remove(self._pending)
         return False
+
+
+def complete_frames(file) -> int:
+    """How many frames of an open trajectory are whole (every series written)."""
+    frames = file["frames"]
+    if COMPLETE in frames.attrs:
+        return int(frames.attrs[COMPLETE])
+    return min(len(frames[name]) for name in frames)  # written before the count existed
+
+
+def read_frames(path) -> list:
+    """The complete frames of a trajectory as (time, frame) pairs, oldest first."""
+    with h5py.File(os.fspath(path), "r") as f:
+        count = complete_frames(f)
+        series = {name: f["frames"][name][:count] for name in f["frames"]}
+    times = series.pop("time")
+    return [(float(t), {name: values[k] for name, values in series.items()}) for k, t in enumerate(times)]
+
+
+def stored_parameters(path) -> dict:
+    """The parameters a trajectory's run used (its `parameters` attribute)."""
+    with h5py.File(os.fspath(path), "r") as f:
+        return json.loads(f.attrs["parameters"])
 
 
 def last_frame(path) -> dict:
     """The last frame of a trajectory as {"time": t, name: array, ...} plus "frames" (the count)."""
-    import h5py
-
     with h5py.File(os.fspath(path), "r") as f:
         frames = f["frames"]
-        count = len(frames["time"])
+        count = complete_frames(f)
         if count == 0:
             raise ValueError(f"{os.fspath(path)!r} has no frames to resume from")
         out = {name: frames[name][count - 1] for name in frames}

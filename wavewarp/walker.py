@@ -172,7 +172,7 @@ class WalkerRun(WaveClock):
                          "period_kinetic": self.period_kinetic}  # fmt: skip
         n = mesh.n_vertices
         self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
-                       "reaction_amount": (), "first_arrival": (n,),
+                       "reaction_amount": (), "reaction_per_vertex": (n,), "first_arrival": (n,),
                        "trace": (self.steps_per_frame, TRACE_COLUMNS)}  # fmt: skip
         self.field_range = (0.0, 1.0)
         self.ground_size = 8.0 * radius
@@ -197,7 +197,7 @@ class WalkerRun(WaveClock):
 
     def frame(self) -> dict:
         return {**self.coupled.state.to_frame(), "reaction_amount": np.array(self.wave.produced()),
-                "first_arrival": self.arrival.times(self.wave.dt), "trace": self._frame_trace}  # fmt: skip
+                "reaction_per_vertex": self.wave.produced_per_vertex(), "first_arrival": self.arrival.times(self.wave.dt), "trace": self._frame_trace}  # fmt: skip
 
     def _record_trace_row(self) -> None:
         self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self.origin_vertex, self._trace_row,
@@ -215,7 +215,9 @@ class WalkerRun(WaveClock):
     def restore(self, frame: dict) -> None:
         """Continue from a saved frame (HDF5 resume): positions, velocities, c, w, the reaction's amount and the time."""
         self.coupled.state.assign_frame(frame)
-        self.wave.set_produced(float(frame["reaction_amount"]))
+        per_vertex = frame.get("reaction_per_vertex")  # NaN in a file written before it was stored
+        self.wave.set_produced(float(frame["reaction_amount"]),
+                               per_vertex if per_vertex is not None and np.isfinite(per_vertex).all() else None)
         self.wave.steps = int(round(frame["time"] / self.wave.dt))
         self.wave.time = self.wave.steps * self.wave.dt
         self.arrival.restore(frame["first_arrival"], self.wave.steps, self.wave.dt)

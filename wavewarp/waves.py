@@ -240,8 +240,18 @@ class FitzHughNagumo(_Stepper):
         With conservative transport C(t) = C(0) + produced() to round-off (IMEX: to the CG tolerance)."""
         return self.produced_offset + float(np.sum(self.state.history["produced"].numpy().astype(np.float64)))
 
-    def set_produced(self, amount: float) -> None:
-        """Start `produced()` from `amount` (a run resumed at a frame that stored it)."""
-        self.state.history["produced"].zero_()
-        self.produced_offset = finite("amount", amount)
+    def set_produced(self, amount: float, per_vertex=None) -> None:
+        """Start `produced()` from `amount` (a run resumed at a frame that stored it); with the frame's
+        `per_vertex` amounts (V,) the sums go on exactly as in the run that wrote them."""
+        if per_vertex is None:
+            self.state.history["produced"].zero_()
+            self.produced_offset = finite("amount", amount)
+        else:
+            self.state.set("produced", per_vertex)
+            self.produced_offset = 0.0
+
+    def produced_per_vertex(self) -> np.ndarray:
+        """(V,) the amount the reaction has added at each vertex since t = 0 (since a resume from an
+        amount alone: `set_produced`)."""
+        return self.state.history["produced"].numpy()
 

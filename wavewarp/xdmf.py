@@ -15,7 +15,7 @@ import tempfile
 
 import numpy as np
 
-from .io import check_writable
+from .io import check_writable, remove_stale_temporaries, temporary_prefix
 
 
 class XdmfWriter:
@@ -36,8 +36,10 @@ class XdmfWriter:
         import meshio
 
         check_writable(self.path)
-        directory, name = os.path.split(self.path)
-        self._folder = tempfile.mkdtemp(prefix=f".{name}.", dir=directory)
+        remove_stale_temporaries(self.path)
+        prefix = temporary_prefix(self.path)
+        self._folder = tempfile.mkdtemp(prefix=os.path.basename(prefix), dir=os.path.dirname(prefix))
+        name = os.path.basename(self.path)
         self._writer = meshio.xdmf.TimeSeriesWriter(os.path.join(self._folder, name))
         cwd = os.getcwd()
         os.chdir(self._folder)  # meshio opens its data file (STEM.h5) relative to the working directory
