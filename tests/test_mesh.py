@@ -1,5 +1,7 @@
 """Mesh validation messages, generators, Loop refinement and file I/O (docs/theory/geometry.md, docs/theory/scenes.md)."""
 
+import re
+
 import numpy as np
 import pytest
 from meshes import loop_reference, octahedron, tetrahedron
@@ -21,7 +23,7 @@ def octahedron_arrays():
         (lambda v, t: (v, np.c_[t, t[:, :1]]), "triangulate polygons"),
         (lambda v, t: (np.where(np.arange(6)[:, None] == 2, np.nan, v), t), "vertex 2 has a non-finite"),
         (lambda v, t: (np.where(np.arange(6)[:, None] == 3, np.inf, v), t), "vertex 3 has a non-finite"),
-        (lambda v, t: (v, np.where(t == 5, 9, t)), "refers to vertex .* must lie in 0..5"),
+        (lambda v, t: (v, np.where(t == 5, 9, t)), "refers to vertices .* must lie in 0..5"),
         (lambda v, t: (v, np.r_[t[:-1], [[0, 0, 5]]]), "triangle 7 is degenerate: it repeats a vertex"),
         (lambda v, t: (np.r_[v, [[0, 0, 0]]], t), "vertex 6 belongs to no triangle"),
         (lambda v, t: (v, t[:-1]), r"belongs only to triangle .* the mesh is open"),
@@ -172,3 +174,23 @@ def test_two_extraordinary_vertices_on_a_triangle_point_to_subdivided():
     with pytest.raises(ValueError, match=r"touches 3 extraordinary .* Mesh.subdivided\(\)"):
         limit_surface(mesh, device="cpu")
     assert mesh.refined_for_patches().n_triangles == 32
+
+
+def test_load_errors_name_the_files_own_numbers(tmp_path):
+    """An open OBJ whose vertices are shuffled: the error names an edge of the missing triangle and a
+    triangle holding it, both in the file's 1-based numbers; plain numbers, no NumPy reprs."""
+    mesh = icosphere(1.0, 1)
+    order = np.random.default_rng(3).permutation(mesh.n_vertices)  # file vertex k is mesh vertex order[k]
+    faces = np.argsort(order)[mesh.triangles] + 1
+    missing, faces = faces[7], np.delete(faces, 7, axis=0)
+    path = tmp_path / "open.obj"
+    path.write_text("".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in mesh.vertices[order].tolist())
+                    + "".join(f"f {a} {b} {c}\n" for a, b, c in faces.tolist()))  # fmt: skip
+    with pytest.raises(ValueError, match=r"counted from 1") as error:
+        wm.load(path)
+    a, b, t = map(int, re.search(r"edge \((\d+), (\d+)\) belongs only to triangle (\d+)", str(error.value)).groups())
+    assert {a, b} <= set(missing.tolist()) and {a, b} <= set(faces[t - 1].tolist())
+    broken = mesh.vertices.copy()
+    broken[5, 1] = np.nan
+    with pytest.raises(ValueError, match=r"^vertex 5 has a non-finite coordinate \(-?[\d.]+, nan, -?[\d.]+\)"):
+        Mesh(broken, mesh.triangles)

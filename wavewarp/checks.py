@@ -4,6 +4,19 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
+
+def plain(value):
+    """`value` with NumPy scalars and arrays as Python numbers and lists, for messages (no np.float64(...))."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (list, tuple)):
+        return type(value)(plain(v) for v in value)
+    return value
+
 
 def positive(name: str, value) -> float:
     value = float(value)
@@ -21,5 +34,5 @@ def finite(name: str, value) -> float:
 
 def count(name: str, value, minimum: int) -> int:
     if isinstance(value, bool) or int(value) != value or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {plain(value)!r}")
     return int(value)

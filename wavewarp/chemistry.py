@@ -19,7 +19,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 import warp as wp
 
-from .checks import count, finite, positive
+from .checks import count, finite, plain, positive
 from .kernels.waves import (
     eval_fhn_explicit,
     eval_fhn_imex_rhs,
@@ -159,7 +159,7 @@ class TelegraphSolver(ChemistrySolver):
         self.gamma = positive("gamma", gamma)
         self.alpha = finite("alpha", alpha)
         if self.alpha < 0:
-            raise ValueError(f"alpha must be >= 0 (a dissipation rate), got {alpha!r}")
+            raise ValueError(f"alpha must be >= 0 (a dissipation rate), got {plain(alpha)!r}")
 
     def _bound(self, eigenvalue: float) -> float:
         return 2.0 / (self.gamma * math.sqrt(eigenvalue))
@@ -254,7 +254,7 @@ class FitzHughNagumoSolver(ChemistrySolver):
         self.nu, self.kappa = finite("nu", nu), finite("kappa", kappa)
         self.epsilon = finite("epsilon", epsilon)
         if self.epsilon < 0 or self.kappa < 0:
-            raise ValueError(f"epsilon and kappa must be >= 0, got epsilon={epsilon!r}, kappa={kappa!r}")
+            raise ValueError(f"epsilon and kappa must be >= 0, got epsilon={plain(epsilon)!r}, kappa={plain(kappa)!r}")
         self.reaction_lipschitz = fhn_reaction_lipschitz(self.nu)
         self.flip_floor = FLIP_FLOOR
         if self.implicit:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .checks import finite, positive
+from .checks import finite, plain, positive
 from .device import reduction_threads
 from .geometry import LimitMask, checked_positions, evaluate
 from .kernels import contact as kernels_contact
@@ -103,7 +103,7 @@ class InertialSolver:
         self.gravity = finite("gravity", gravity)
         self.damping = finite("damping", damping)
         if self.gravity < 0 or self.damping < 0:
-            raise ValueError(f"gravity and damping must be >= 0, got gravity={gravity!r}, damping={damping!r}")
+            raise ValueError(f"gravity and damping must be >= 0, got gravity={plain(gravity)!r}, damping={plain(damping)!r}")
         mesh = shell.mesh
         n = mesh.n_vertices
         self._reduction_threads = reduction_threads(n)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .checks import finite, positive
+from .checks import finite, plain, positive
 from .laplace import LaplaceBeltrami
 
 
@@ -17,7 +17,7 @@ def _origin_point(operator: LaplaceBeltrami, origin) -> np.ndarray:
         return operator.points()[int(origin)]
     point = np.asarray(origin, dtype=np.float64)
     if point.shape != (3,) or not np.all(np.isfinite(point)):
-        raise ValueError(f"origin must be a vertex index or a finite point (3,), got {origin!r}")
+        raise ValueError(f"origin must be a vertex index or a finite point (3,), got {plain(origin)!r}")
     return point
 
 
@@ -70,7 +70,7 @@ def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=Non
         axis = normals[np.argmin(np.linalg.norm(operator.points() - p, axis=1))]
     axis = np.asarray(axis, dtype=np.float64)
     if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) == 0:
-        raise ValueError(f"axis must be a finite non-zero vector (3,), got {axis!r}")
+        raise ValueError(f"axis must be a finite non-zero vector (3,), got {plain(axis)!r}")
     axis = axis / np.linalg.norm(axis)
     height = np.abs((p - operator.points()) @ axis)
     e = np.exp(np.minimum(k * (height - delta), 700.0))

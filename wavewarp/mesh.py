@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-from .checks import positive
+from .checks import plain, positive
 from .io import atomic_path
 from .subdivision import limit_weight, loop_subdivide
 from .topology import Topology, unique_keys
@@ -27,10 +27,11 @@ class Mesh:
     """Closed, oriented 2-manifold triangle control mesh.
 
     `vertices` (V, 3) float64 and `triangles` (T, 3) int32, counter-clockwise seen from
-    outside (outward normals). Both arrays are stored read-only.
+    outside (outward normals). Both arrays are stored read-only. `numbering` names vertices and
+    triangles in validation errors (default: these arrays' indices).
     """
 
-    def __init__(self, vertices, triangles):
+    def __init__(self, vertices, triangles, *, numbering: Numbering | None = None):
         vertices = np.array(vertices, dtype=np.float64)
         triangles = np.asarray(triangles)
         if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -44,7 +45,7 @@ class Mesh:
             if triangles.size and not np.all(np.mod(triangles, 1) == 0):
                 raise ValueError("triangles must hold integer vertex indices")
         triangles = np.array(triangles, dtype=np.int64)
-        _validate(vertices, triangles)
+        _validate(vertices, triangles, numbering or Numbering())
         vertices.setflags(write=False)
         self.vertices = vertices
         self.triangles = triangles.astype(np.int32)
@@ -100,7 +101,7 @@ class Mesh:
     def subdivided(self, levels: int = 1) -> Mesh:
         """Loop subdivision of the control mesh, `levels` times (Loop's original β)."""
         if int(levels) != levels or levels < 0:
-            raise ValueError(f"levels must be a non-negative integer, got {levels!r}")
+            raise ValueError(f"levels must be a non-negative integer, got {plain(levels)!r}")
         vertices, triangles = self.vertices, self.triangles
         for _ in range(int(levels)):
             vertices, triangles = loop_subdivide(vertices, triangles)
@@ -173,7 +174,7 @@ def hilbert_keys(points, bits: int = 16) -> np.ndarray:
     2^bits cells per side (Skilling 2004, "Programming the Hilbert curve", vectorised)."""
     points = np.asarray(points, dtype=np.float64)
     if not 1 <= bits <= 21:
-        raise ValueError(f"bits must lie in 1..21 (a 63-bit key), got {bits!r}")
+        raise ValueError(f"bits must lie in 1..21 (a 63-bit key), got {plain(bits)!r}")
     lo = points.min(axis=0)
     side = float(np.max(points.max(axis=0) - lo)) or 1.0
     cells = np.uint64(2**bits - 1)
@@ -208,6 +209,30 @@ def hilbert_keys(points, bits: int = 16) -> np.ndarray:
 # Validation
 
 
+class Numbering:
+    """How validation errors name vertices and triangles: `vertex_ids[i]` and `triangle_ids[t]` (the
+    numbers a file gave them; default the arrays' own indices) counted from `base` (1 for OBJ),
+    with `source` ("in ball.obj, counted from 1") saying whose numbers they are."""
+
+    def __init__(self, vertex_ids=None, triangle_ids=None, base: int = 0, source: str = "", points=None):
+        self.vertex_ids, self.triangle_ids, self.base, self.source = vertex_ids, triangle_ids, int(base), source
+        self.points = points  # name vertices by their coordinates (files without vertex numbers: STL)
+
+    def vertex(self, i):
+        if self.points is not None:
+            return "(" + ", ".join(f"{float(value):g}" for value in self.points[int(i)]) + ")"
+        return int(i if self.vertex_ids is None else self.vertex_ids[int(i)]) + self.base
+
+    def triangle(self, t) -> int:
+        return int(t if self.triangle_ids is None else self.triangle_ids[int(t)]) + self.base
+
+    def vertices(self, indices) -> tuple:
+        return tuple(self.vertex(i) for i in indices)
+
+    def where(self) -> str:
+        return f" (numbered as {self.source})" if self.source else ""
+
+
 def _undirected_edges(triangles: np.ndarray) -> np.ndarray:
     """Sorted (lo, hi) vertex pairs of the edges, each once (integer keys: far faster than
     np.unique over rows)."""
@@ -217,20 +242,23 @@ def _undirected_edges(triangles: np.ndarray) -> np.ndarray:
     return np.stack([keys // n, keys % n], axis=1)
 
 
-def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
+def _validate(vertices: np.ndarray, triangles: np.ndarray, names: Numbering) -> None:
+    """ValueError naming the first defect and its fix, in `names`' numbering."""
+    where = names.where()
     n_vertices, n_triangles = len(vertices), len(triangles)
     if n_triangles < 4:
         raise ValueError(f"a closed mesh needs at least 4 triangles, got {n_triangles}")
     finite = np.all(np.isfinite(vertices), axis=1)
     if not np.all(finite):
         i = int(np.flatnonzero(~finite)[0])
-        raise ValueError(f"vertex {i} has a non-finite coordinate {tuple(vertices[i])}: fix or remove it")
+        coordinates = ", ".join(f"{float(value):g}" for value in vertices[i])
+        raise ValueError(f"vertex {names.vertex(i)}{where} has a non-finite coordinate ({coordinates}): fix or remove it")
     out_of_range = (triangles < 0) | (triangles >= n_vertices)
     if np.any(out_of_range):
         t = int(np.argwhere(out_of_range)[0, 0])
         raise ValueError(
-            f"triangle {t} refers to vertex {tuple(int(i) for i in triangles[t])}, but vertex "
-            f"indices must lie in 0..{n_vertices - 1}"
+            f"triangle {names.triangle(t)}{where} refers to vertices {names.vertices(triangles[t])}, but "
+            f"vertex numbers must lie in {names.base}..{n_vertices - 1 + names.base}"
         )
     repeated = (
         (triangles[:, 0] == triangles[:, 1])
@@ -240,8 +268,8 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
     if np.any(repeated):
         t = int(np.flatnonzero(repeated)[0])
         raise ValueError(
-            f"triangle {t} is degenerate: it repeats a vertex {tuple(int(i) for i in triangles[t])}; "
-            "remove it"
+            f"triangle {names.triangle(t)}{where} is degenerate: it repeats a vertex "
+            f"{names.vertices(triangles[t])}; remove it"
         )
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
     double_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
@@ -250,8 +278,8 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
     if np.any(flat):
         t = int(np.flatnonzero(flat)[0])
         raise ValueError(
-            f"triangle {t} (vertices {tuple(int(i) for i in triangles[t])}) is degenerate: its "
-            "corners are collinear (zero area); remove it or move its vertices apart"
+            f"triangle {names.triangle(t)} (vertices {names.vertices(triangles[t])}){where} is degenerate: "
+            "its corners are collinear (zero area); remove it or move its vertices apart"
         )
     sorted_tri = np.sort(triangles, axis=1)
     order = np.lexsort(sorted_tri.T[::-1])
@@ -259,14 +287,14 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
     if len(repeats):
         same = np.sort(order[repeats[0] : repeats[0] + 2])
         raise ValueError(
-            f"triangles {int(same[0])} and {int(same[1])} are duplicates (both use vertices "
-            f"{tuple(int(i) for i in sorted_tri[same[0]])}): remove one of them"
+            f"triangles {names.triangle(same[0])} and {names.triangle(same[1])}{where} are duplicates (both use "
+            f"vertices {names.vertices(sorted_tri[same[0]])}): remove one of them"
         )
     used = np.zeros(n_vertices, dtype=bool)
     used[triangles.reshape(-1)] = True
     if not np.all(used):
         i = int(np.flatnonzero(~used)[0])
-        raise ValueError(f"vertex {i} belongs to no triangle: remove unused vertices")
+        raise ValueError(f"vertex {names.vertex(i)}{where} belongs to no triangle: remove unused vertices")
 
     tails = triangles.reshape(-1)
     heads = np.roll(triangles, -1, axis=1).reshape(-1)
@@ -276,16 +304,16 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
     if np.any(uses == 1):
         h = int(np.flatnonzero(uses[inverse] == 1)[0])
         raise ValueError(
-            f"edge ({int(tails[h])}, {int(heads[h])}) belongs only to triangle {int(owner[h])}: "
-            "the mesh is open; close the hole (a shell must be a closed surface)"
+            f"edge ({names.vertex(tails[h])}, {names.vertex(heads[h])}) belongs only to triangle "
+            f"{names.triangle(owner[h])}{where}: the mesh is open; close the hole (a shell must be a closed surface)"
         )
     if np.any(uses > 2):
         h = int(np.flatnonzero(uses[inverse] > 2)[0])
         sharing = owner[inverse == inverse[h]]
         raise ValueError(
-            f"edge ({int(tails[h])}, {int(heads[h])}) is shared by {len(sharing)} triangles "
-            f"{tuple(int(t) for t in sharing)}: the mesh is non-manifold there; remove the extra "
-            "sheet"
+            f"edge ({names.vertex(tails[h])}, {names.vertex(heads[h])}) is shared by {len(sharing)} triangles "
+            f"{tuple(names.triangle(t) for t in sharing)}{where}: the mesh is non-manifold there; remove the "
+            "extra sheet"
         )
     directed = tails * n_vertices + heads
     order = np.argsort(directed, kind="stable")
@@ -293,9 +321,9 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
     if len(same_direction):
         h0, h1 = order[same_direction[0]], order[same_direction[0] + 1]
         raise ValueError(
-            f"triangles {int(owner[h0])} and {int(owner[h1])} both run along edge "
-            f"{int(tails[h0])} -> {int(heads[h0])}: their orientations are inconsistent; reverse "
-            f"the vertex order of one of them (and of every triangle oriented like it)"
+            f"triangles {names.triangle(owner[h0])} and {names.triangle(owner[h1])} both run along edge "
+            f"{names.vertex(tails[h0])} -> {names.vertex(heads[h0])}{where}: their orientations are inconsistent; "
+            "reverse the vertex order of one of them (and of every triangle oriented like it)"
         )
 
     topology = Topology(triangles, n_vertices)
@@ -305,15 +333,15 @@ def _validate(vertices: np.ndarray, triangles: np.ndarray) -> None:
     if np.any(pinched):
         i = int(np.flatnonzero(pinched)[0])
         raise ValueError(
-            f"vertex {i} joins separate fans of triangles (a pinch point): the mesh is "
+            f"vertex {names.vertex(i)}{where} joins separate fans of triangles (a pinch point): the mesh is "
             "non-manifold there; give each sheet its own copy of the vertex"
         )
     component = _components(n_vertices, keys // n_vertices, keys % n_vertices)
     if component.max() > 0:
         other = int(np.flatnonzero(component != component[0])[0])
         raise ValueError(
-            f"the mesh has {component.max() + 1} separate components (vertices 0 and {other} are "
-            "not connected): make one Mesh per closed shell"
+            f"the mesh has {component.max() + 1} separate components (vertices {names.vertex(0)} and "
+            f"{names.vertex(other)}{where} are not connected): make one Mesh per closed shell"
         )
     volume = float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
     if volume <= 0.0:
@@ -363,7 +391,7 @@ def icosphere(radius: float = 1.0, level: int = 3, *, limit: bool = True, reorde
     """
     positive("radius", radius)
     if int(level) != level or level < 0:
-        raise ValueError(f"level must be a non-negative integer, got {level!r}")
+        raise ValueError(f"level must be a non-negative integer, got {plain(level)!r}")
     phi = (1.0 + 5.0**0.5) / 2.0
     vertices = np.array(
         [
@@ -429,14 +457,17 @@ def _grid_face(origin, du, dv, n, toward_centre):
     return points.reshape(-1, 3), np.array(triangles)
 
 
-def _merge(parts):
-    """Join (points, triangles) parts, welding coincident points."""
+def _merge(parts, with_first: bool = False):
+    """Join (points, triangles) parts, welding coincident points (`with_first`: also the index of
+    each welded point's first copy)."""
     points = np.concatenate([p for p, _ in parts])
     offset = np.cumsum([0] + [len(p) for p, _ in parts])
     triangles = np.concatenate([t + o for (_, t), o in zip(parts, offset)])
     scale = np.max(np.abs(points))
     keys = np.round(points / scale * 1e9).astype(np.int64)
     _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    if with_first:
+        return points[first], inverse.reshape(-1)[triangles], first
     return points[first], inverse.reshape(-1)[triangles]
 
 
@@ -513,7 +544,7 @@ def _triangle_cap(corners, n, flip):
 
 def _check_even_divisions(divisions):
     if int(divisions) != divisions or divisions < 2 or divisions % 2:
-        raise ValueError(f"divisions must be an even integer >= 2, got {divisions!r}")
+        raise ValueError(f"divisions must be an even integer >= 2, got {plain(divisions)!r}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -549,11 +580,22 @@ def load(path, *, weld: bool = True, reorder: bool = True) -> Mesh:
     if points.shape[1] == 2:
         raise ValueError(f"{path!r} holds a planar 2-D mesh; a shell needs 3-D vertices")
     triangles = np.concatenate(blocks).astype(np.int64)
+    file_ids = np.arange(len(points))
     if weld and np.all(np.isfinite(points)):
-        points, triangles = _merge([(points[:, :3], triangles)])
+        points, triangles, file_ids = _merge([(points[:, :3], triangles)], with_first=True)
     used, triangles = np.unique(triangles, return_inverse=True)
-    mesh = Mesh(points[used], triangles.reshape(-1, 3))
+    mesh = Mesh(points[used], triangles.reshape(-1, 3), numbering=file_numbering(path, file_ids[used], points[used]))
     return mesh.reordered() if reorder else mesh
+
+
+def file_numbering(path: str, vertex_ids, points) -> Numbering:
+    """How a mesh file numbers its vertices and triangles: OBJ from 1, PLY, OFF, VTK and others from 0;
+    STL has no vertex numbers (its vertices are named by their coordinates, its facets from 1)."""
+    name, kind = os.path.basename(path), os.path.splitext(path)[1].lower()
+    if kind == ".stl":
+        return Numbering(base=1, source=f"in {name}: facets counted from 1", points=points)
+    base = 1 if kind == ".obj" else 0
+    return Numbering(vertex_ids, base=base, source=f"in {name}, counted from {base}")
 
 
 def save(mesh: Mesh, path) -> None:

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sparse
 import scipy.sparse.linalg as sparse_linalg
 
+from .checks import plain
 from .laplace import LaplaceBeltrami
 from .newton import NewtonFinish, ShiftedInverse, rigid_modes
 
@@ -35,7 +36,7 @@ def softest_modes(shell, x, c=0.0, count: int = 6) -> Modes:
         raise ValueError("softest_modes: self-contact is not in the Hessian; build the shell with self_contact=None")
     largest = 3 * shell.mesh.n_vertices - 7  # eigsh needs count < n, less the six rigid motions
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 1 <= count <= largest:
-        raise ValueError(f"count must be an integer from 1 to {largest} for this mesh, got {count!r}")
+        raise ValueError(f"count must be an integer from 1 to {largest} for this mesh, got {plain(count)!r}")
     x = np.asarray(x, dtype=np.float64)
     shell.forces(x, c)  # sets the active reference for c
     newton = shell._newton or NewtonFinish(shell)

@@ -14,7 +14,7 @@ import math
 
 import warp as wp
 
-from .checks import count, finite, positive
+from .checks import count, finite, plain, positive
 from .device import run_steps
 
 
@@ -79,7 +79,7 @@ class Stepper:
     def checked_safety(safety) -> float:
         safety = positive("safety", safety)
         if safety > 1:
-            raise ValueError(f"safety must lie in (0, 1], got {safety!r}")
+            raise ValueError(f"safety must lie in (0, 1], got {plain(safety)!r}")
         return safety
 
     def refresh(self) -> None:

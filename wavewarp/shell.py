@@ -19,7 +19,7 @@ import weakref
 import numpy as np
 import warp as wp
 
-from .checks import finite, positive
+from .checks import finite, plain, positive
 from .device import block_sum, mat22, numpy_dtype, reduction_threads
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.reduce import REDUCTION_BLOCK
@@ -97,11 +97,11 @@ class Shell:
         self.young = positive("young", young)
         self.poisson = finite("poisson", poisson)
         if not -1.0 < self.poisson < 0.5:
-            raise ValueError(f"poisson must lie in (-1, 0.5), got {poisson!r}")
+            raise ValueError(f"poisson must lie in (-1, 0.5), got {plain(poisson)!r}")
         self.AC, self.AI = finite("AC", AC), finite("AI", AI)
         self.volume_penalty = finite("volume_penalty", volume_penalty)
         if self.volume_penalty < 0:
-            raise ValueError(f"volume_penalty must be >= 0, got {volume_penalty!r}")
+            raise ValueError(f"volume_penalty must be >= 0, got {plain(volume_penalty)!r}")
         if model not in MODELS:
             raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
         if gradient not in GRADIENTS:
