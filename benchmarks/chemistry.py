@@ -34,7 +34,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import warp as wp
 
-from wavewarp.device import describe_device, device_tag
+from wavewarp.device import describe_device, device_tag, resolve_device
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
@@ -204,7 +204,7 @@ def save_json(args, device, result) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="wavewarp bench chemistry", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None)
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 3-4 and spectra at levels 2-3 (a smoke test)")
@@ -221,8 +221,7 @@ def main(argv=None) -> int:
     min_seconds = args.min_seconds or (0.3 if args.quick else 2.0)
     os.makedirs(args.out, exist_ok=True)
     wp.config.log_level = wp.LOG_WARNING
-    wp.init()
-    device = wp.get_device(args.device) if args.device else wp.get_device()
+    device = resolve_device(args.device)
 
     configurations = [("telegraph", d, p, dtype, True) for d, p in STEPPERS for dtype in ("float32", "float64")]
     configurations += [("telegraph", d, 0, "float32", False) for d in ("subdivision", "p1")]  # matrix-free K

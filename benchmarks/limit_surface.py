@@ -20,7 +20,7 @@ from datetime import date
 import numpy as np
 import warp as wp
 
-from wavewarp.device import describe_device, device_tag
+from wavewarp.device import describe_device, device_tag, resolve_device
 from wavewarp.geometry import SurfaceTables, evaluate
 from wavewarp.mesh import icosphere
 
@@ -73,7 +73,7 @@ def throughput(mesh, device: str, dtype: str, repeats: int) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="wavewarp bench limit_surface", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None)
     parser.add_argument("--levels", type=int, nargs="+", default=[4, 6, 7])
     parser.add_argument("--repeats", type=int, default=5)
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
-    device = wp.get_device(args.device) if args.device else wp.get_device()
+    device = resolve_device(args.device)
     rows = []
     for level in args.levels:
         mesh = icosphere(1.0, level)

@@ -24,7 +24,7 @@ import warp as wp
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from numpy_shell import NumpyShell  # noqa: E402
 
-from wavewarp.device import describe_device, device_tag  # noqa: E402
+from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.io import write_json  # noqa: E402
 from wavewarp.mesh import icosphere  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
@@ -90,7 +90,7 @@ def relax_rows(device):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="wavewarp bench shell", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None)
     parser.add_argument("--levels", type=int, nargs="+", default=[4, 6, 8])
     parser.add_argument("--numpy-max-level", type=int, default=8, help="skip the NumPy baseline above this level")
@@ -98,8 +98,7 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3 only (smoke test)")
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
-    wp.init()
-    device = wp.get_device(args.device) if args.device else wp.get_device()
+    device = resolve_device(args.device)
     levels = [2, 3] if args.quick else args.levels
     forces = []
     for level in levels:

@@ -279,7 +279,7 @@ def report(rows: list, peaks: dict) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="wavewarp bench speed", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None)
     parser.add_argument("--levels", type=int, nargs="+", default=[3, 4, 5, 6, 7, 8], help="icosphere levels (kernels)")
     parser.add_argument("--step-levels", type=int, nargs="+", default=[3, 4, 5],

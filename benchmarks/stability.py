@@ -63,7 +63,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import warp as wp
 
-from wavewarp.device import describe_device, device_tag
+from wavewarp.device import describe_device, device_tag, resolve_device
 from wavewarp.dynamics import ShellDynamics
 from wavewarp.io import write_json, write_png
 from wavewarp.laplace import LaplaceBeltrami
@@ -342,7 +342,7 @@ def save_json(args, device, result) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="wavewarp bench stability", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None)
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="small meshes, coarse bisection (a CPU smoke test)")
@@ -361,8 +361,7 @@ def main(argv=None) -> int:
     resolution = args.resolution or (0.02 if args.quick else 0.002)
     os.makedirs(args.out, exist_ok=True)
     wp.config.log_level = wp.LOG_WARNING
-    wp.init()
-    device = wp.get_device(args.device) if args.device else wp.get_device()
+    device = resolve_device(args.device)
     result = {
         "benchmark": "stability",
         "date": date.today().isoformat(),

@@ -546,7 +546,7 @@ def chart(result: dict, path: str) -> None:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="wavewarp bench warp_libraries", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present, else cpu)")
     parser.add_argument("--out", default=".")
     parser.add_argument("--quick", action="store_true", help="levels 3-4 and fewer repeats (seconds)")

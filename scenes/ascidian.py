@@ -17,7 +17,7 @@ class Parameters(SphereParameters):
     AC: float = param(1.5, "metric coupling AC (the paper's)")
     AI: float = param(1.6, "curvature coupling AI (the paper's)")
     mu_v: float = param(24.0, "volume penalty μV in units of Y h / R⁴ (the paper's)", minimum=0.0)
-    t_end: float = param(0.0, "end time; 0 = 0.73 π R / γ, before the wave focuses on the antipode", minimum=0.0)
+    t_end: float = param(0.0, "end time; auto (0) = 0.73 π R / γ, before the wave focuses on the antipode", minimum=0.0, auto=True)
 
 
 QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3

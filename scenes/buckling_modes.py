@@ -17,7 +17,7 @@ DESCRIPTION = "buckling modes: steady tanh front on a sphere, AI 7.5–13.5, h/R
 class Parameters(BucklingParameters):
     AI: float = param(10.5, "curvature coupling AI (Fig. S1b spans 7.5–13.5)")
     k: float = param(1.0, "front steepness k (1/length): the front is ~2/k wide", positive=True)
-    delta: float = param(0.0, "front height δ below the pole (length); 0 = R/2", minimum=0.0)
+    delta: float = param(0.0, "front height δ below the pole (length); auto (0) = R/2", minimum=0.0, auto=True)
 
 
 QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3

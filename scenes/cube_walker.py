@@ -21,7 +21,7 @@ class Parameters(WalkerParameters):
     AC: float = param(0.2, "metric coupling AC (as the prism walker)")
     mu_v: float = param(6.4, "volume penalty μV in units of Y h / L⁴ (0.4 Y h / R⁴ with R = L/2)", minimum=0.0)
     divisions: int = param(32, "control squares per face edge (even): 12,288 triangles, the sphere walker's level 4 "
-                           "resolution", minimum=2)  # fmt: skip
+                           "resolution", minimum=2, even=True)  # fmt: skip
     rule: str = param("3", "quadrature rule")
     origin: str = param("edge", "where the first pulse starts", choices=tuple(ORIGINS))
 

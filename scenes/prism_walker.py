@@ -22,7 +22,7 @@ class Parameters(WalkerParameters):
     AC: float = param(0.2, "metric coupling AC (the paper's)")
     mu_v: float = param(11.1, "volume penalty μV in units of Y h / L⁴ (the paper's)", minimum=0.0)
     divisions: int = param(34, "control squares per edge (even): 9,248 triangles, the sphere walker's level 4 "
-                           "resolution", minimum=2)  # fmt: skip
+                           "resolution", minimum=2, even=True)  # fmt: skip
     rule: str = param("3", "quadrature rule")
     origin: str = param("vertex", "where the first pulse starts", choices=tuple(ORIGINS))
 

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 import warp as wp
 
+from wavewarp.device import init_warp
+
 wp.config.log_level = wp.LOG_WARNING
-wp.init()
+init_warp()
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
 

@@ -11,7 +11,8 @@ from pxr import Usd, UsdGeom
 from wavewarp import __version__
 from wavewarp.cli import main
 from wavewarp.mesh import icosphere
-from wavewarp.usd import UsdAnimation, colour_map
+from wavewarp.colours import colour_map
+from wavewarp.usd import UsdAnimation
 
 
 def run_cli(*args):
@@ -39,6 +40,9 @@ def test_render_writes_a_loop_usd_with_curvature_colours(tmp_path, capsys):
     np.testing.assert_allclose(curvature, 0.5, rtol=0.05)  # 1/R
     colours = UsdGeom.PrimvarsAPI(mesh).GetPrimvar("displayColor")
     assert colours.GetInterpolation() == "vertex" and len(colours.Get(0)) == 162
+    stated = stage.GetRootLayer().customLayerData  # render's explicit scale: 1st to 99th percentile
+    np.testing.assert_allclose(list(stated["wavewarp:colourRange"]), np.percentile(curvature, [1, 99]), rtol=1e-6)
+    assert stated["wavewarp:colourField"] == "meanCurvature" and "wavewarp:colourPercentiles" not in stated
     assert [p.name for p in tmp_path.iterdir()] == ["sphere.usda"]
 
 
@@ -76,8 +80,14 @@ def test_usd_animation_is_atomic_and_keeps_frames_on_interrupt(tmp_path):
             raise KeyboardInterrupt
     stage = Usd.Stage.Open(str(path))
     assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, 2)
-    points = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Shell")).GetPointsAttr()
-    np.testing.assert_allclose(np.array(points.Get(2)), mesh.vertices * 1.2, rtol=1e-6)
+    shell = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Shell"))
+    np.testing.assert_allclose(np.array(shell.GetPointsAttr().Get(2)), mesh.vertices * 1.2, rtol=1e-6)
+    # the frames kept are coloured on their own range: c = 0, 1/2, 1 spans [0, 1]
+    assert list(stage.GetRootLayer().customLayerData["wavewarp:colourRange"]) == [0.0, 1.0]
+    colours = UsdGeom.PrimvarsAPI(shell).GetPrimvar("displayColor")
+    for k in range(3):
+        expected = colour_map(np.full(mesh.n_vertices, k / 2), 0.0, 1.0)
+        np.testing.assert_allclose(np.array(colours.Get(k)), expected, atol=1e-7)
     assert [p.name for p in tmp_path.iterdir()] == ["a.usd"]
 
 

@@ -122,8 +122,8 @@ def test_adaptive_dt_goes_on_below_a_falling_bound_and_resumes_exactly(falling_b
     with h5py.File(full, "r") as f:
         dt = json.loads(f.attrs["parameters"])["dt"]
         times, steps = f["frames/time"][...], f["frames/chemistry_dt"][...]
-    # the scene's dt is 0.4 × the rest bound; after the fall, 0.9 × a quarter of it: 0.5625 dt
-    assert summary["chemistry_dt_changes"] >= 1 and summary["chemistry_dt"] < 0.6 * dt
+    # the scene's dt is at most 0.4 × the rest bound; after the fall, 0.9 × a quarter of the bound
+    assert summary["chemistry_dt_changes"] >= 1 and summary["chemistry_dt"] < dt
     assert steps[0] == dt and steps[-1] == summary["chemistry_dt"]
     interval = times[1] - times[0]
     assert np.abs(times - interval * np.arange(len(times))).max() <= summary["chemistry_dt"]  # frames on time

@@ -7,6 +7,9 @@ import math
 import numpy as np
 
 
+AUTOMATIC_DT = "let wavewarp choose it (dt=None in Python; --set dt=auto on the command line)"
+
+
 def plain(value):
     """`value` with NumPy scalars and arrays as Python numbers and lists, for messages (no np.float64(...))."""
     if isinstance(value, np.ndarray):

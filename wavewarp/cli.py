@@ -16,11 +16,13 @@ from wavewarp.benchmarks import NAMES as BENCHMARKS
 
 from .version import __version__
 from .driver import simulate
+from .device import resolve_device
 from .geometry import limit_positions
 from .io import check_writable
 from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
 from .relax import RelaxationError
+from .sizing import check_run_size
 from .render import render
 from .trajectory import TrajectoryWriter, read_frames, stored_parameters
 from .usd import UsdAnimation
@@ -53,6 +55,7 @@ def _scene_run(args) -> int:
     if args.help_parameters:
         print("\n".join(help_lines(module.Parameters)))
         return 0
+    resolve_device(args.device)  # an unavailable device is refused before anything is built
     out = args.out or f"{module.NAME}.usda"
     h5_path = args.h5 or f"{os.path.splitext(out)[0]}_trajectory.h5"
     p = _parameters(module, args, h5_path)
@@ -70,8 +73,8 @@ def _scene_run(args) -> int:
         print(f"wavewarp run {module.NAME}: {message}", file=sys.stderr)
 
     run = module.build(p, mesh=load(args.mesh) if args.mesh else None, device=args.device, seed=args.seed, report=report)
-    usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", field_range=run.field_range,
-                       ground_size=getattr(run, "ground_size", 0.0))  # fmt: skip
+    usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", surface=args.usd_surface,
+                       bake_levels=args.usd_bake_levels, ground_size=getattr(run, "ground_size", 0.0))  # fmt: skip
     h5 = TrajectoryWriter(h5_path, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
                           scene=module.NAME, parameters=run.resolved, device=str(run.shell.device),
                           resume=args.resume)  # fmt: skip
@@ -106,9 +109,12 @@ def _scene_run(args) -> int:
 
 def _build_mesh(args):
     if args.mesh == "icosphere":
+        check_run_size("--level", args.level, icosphere, device=args.device)
         mesh = icosphere(args.size, args.level)
     elif args.mesh in ("cube", "prism"):
-        mesh = {"cube": cube, "prism": prism}[args.mesh](args.size, 2 * max(args.level, 1))
+        generator = {"cube": cube, "prism": prism}[args.mesh]
+        check_run_size("divisions (2 × --level)", 2 * max(args.level, 1), generator, device=args.device)
+        mesh = generator(args.size, 2 * max(args.level, 1))
     else:
         mesh = load(args.mesh)
     if mesh.needs_refinement:
@@ -119,7 +125,8 @@ def _build_mesh(args):
 
 def _render(args) -> int:
     wp.config.log_level = wp.LOG_WARNING
-    summary = render(_build_mesh(args), args.out, rule=args.rule, device=args.device, dtype=args.dtype, name=args.mesh)
+    summary = render(_build_mesh(args), args.out, rule=args.rule, device=args.device, dtype=args.dtype, name=args.mesh,
+                     surface=args.usd_surface, bake_levels=args.usd_bake_levels)  # fmt: skip
     if args.json:
         print(json.dumps(summary))
     else:
@@ -134,12 +141,46 @@ def _bench(args) -> int:
     return importlib.import_module(f"wavewarp.benchmarks.{args.name}").main(args.options)
 
 
-def parser() -> argparse.ArgumentParser:
+def scene_epilog(argv) -> str | None:
+    """For `wavewarp run SCENE --help`: that scene's parameters with their defaults and meaning."""
+    if len(argv) < 2 or argv[0] != "run" or not {"-h", "--help"} & set(argv):
+        return None
+    scene = next((word for word in argv[1:] if not word.startswith("-")), None)
+    try:
+        module = load_scene(scene) if scene else None
+    except ValueError:
+        return None
+    if module is None:
+        return None
+    lines = "\n".join(f"  {line}" for line in help_lines(module.Parameters))
+    quick = ", ".join(f"{k}={v}" for k, v in getattr(module, "QUICK", {}).items())
+    return (f"{module.NAME}: {getattr(module, 'DESCRIPTION', '')}\n\nits parameters (--set NAME=VALUE; "
+            f"NAME=auto where a value is automatic):\n{lines}" + (f"\n\n--quick sets {quick}" if quick else ""))  # fmt: skip
+
+
+def _refinements(text: str) -> int:
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return int(text)
+
+
+def _usd_arguments(command) -> None:
+    command.add_argument("--usd-surface", default="loop", choices=("loop", "baked"),
+                         help="loop: the control mesh with subdivisionScheme loop (viewers that refine Loop draw the "
+                         "limit surface); baked: the limit surface itself, refined --usd-bake-levels times, for "
+                         "viewers without Loop subdivision (Blender, F3D)")  # fmt: skip
+    command.add_argument("--usd-bake-levels", type=_refinements, default=2,
+                         help="Loop refinements of the baked surface (default 2: 16 triangles per control triangle)")
+
+
+def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     main_parser = argparse.ArgumentParser(prog="wavewarp", description="Chemical waves on active elastic shells.")
     main_parser.add_argument("--version", action="version", version=f"wavewarp {__version__}")
     commands = main_parser.add_subparsers(dest="command", required=True)
     commands.add_parser("list", help="scene names, one line each").set_defaults(run=_list)
-    run = commands.add_parser("run", help="run a scene: USD animation (and HDF5 trajectory)")
+    run = commands.add_parser("run", help="run a scene: USD animation and HDF5 trajectory",
+                              epilog=scene_help or "wavewarp run SCENE --help lists SCENE's parameters",
+                              formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     run.add_argument("scene", help="a scene name (wavewarp list) or the path of a scene script")
     run.add_argument("--out", default=None, help="USD file (default SCENE.usda)")
     run.add_argument("--h5", default=None, help="HDF5 trajectory to write, frame by frame (or, with --resume, to continue); "
@@ -148,6 +189,7 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scene parameter")
     run.add_argument("--parameters", dest="help_parameters", action="store_true",
                      help="list the scene's parameters with their defaults and meaning, and exit")  # fmt: skip
+    _usd_arguments(run)
     run.add_argument("--xdmf", default=None, help="also write frames for ParaView (FILE.xdmf + FILE.h5)")
     run.add_argument("--mesh", default=None, help="any closed triangle mesh file in place of the scene's surface")
     run.add_argument("--quick", action="store_true", help="a reduced run for smoke tests (under a minute on a CPU)")
@@ -163,6 +205,7 @@ def parser() -> argparse.ArgumentParser:
     draw.add_argument("--out", default="surface.usda", help="USD file to write (default surface.usda)")
     draw.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
     draw.add_argument("--dtype", default="float32", choices=["float32", "float64"])
+    _usd_arguments(draw)
     draw.add_argument("--json", action="store_true", help="print one JSON object with the results")
     draw.set_defaults(run=_render)
     bench = commands.add_parser("bench", help="a benchmark: wavewarp bench NAME [--quick] [--device D] [--out DIR] ...")
@@ -173,7 +216,8 @@ def parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    args = parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parser(scene_epilog(argv)).parse_args(argv)
     try:
         return args.run(args)
     except (ValueError, OSError) as error:

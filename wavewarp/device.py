@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import os
 import platform
+import sys
+import tempfile
 
 import numpy as np
 import warp as wp
@@ -13,15 +15,43 @@ from .kernels.reduce import REDUCTION_BLOCK, block_sum_kernel
 DTYPES = {"float32": wp.float32, "float64": wp.float64}
 
 
+NO_CUDA_DRIVER = "Could not find or load the NVIDIA CUDA driver"
+
+
+def init_warp() -> None:
+    """Initialise Warp once, without its native warning on machines with no CUDA driver: a CPU
+    run does not need one, and asking for CUDA there gets resolve_device's error instead."""
+    if getattr(init_warp, "done", False):
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        printed = captured.read().decode(errors="replace").splitlines()
+    kept = [line for line in printed if NO_CUDA_DRIVER not in line]
+    if kept:
+        print("\n".join(kept), file=sys.stderr)
+    init_warp.done = True
+
+
 def resolve_device(device=None) -> wp.context.Device:
     """Warp device for "cpu", "cuda", "cuda:N"; None picks CUDA when present, else the CPU."""
-    wp.init()
+    init_warp()
     if device is None:
         return wp.get_device("cuda:0" if wp.is_cuda_available() else "cpu")
+    available = ", ".join(d.alias for d in wp.get_devices())
+    if str(device).startswith("cuda") and not wp.is_cuda_available():
+        raise ValueError(f"device {device!r} is not available: no NVIDIA CUDA driver or GPU was found on this "
+                         f"machine; available: {available}")  # fmt: skip
     try:
         return wp.get_device(device)
     except (RuntimeError, ValueError) as error:
-        available = ", ".join(d.alias for d in wp.get_devices())
         raise ValueError(f"device {device!r} is not available ({error}); available: {available}") from None
 
 

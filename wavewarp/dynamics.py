@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .checks import finite, plain, positive
+from .checks import AUTOMATIC_DT, finite, plain, positive
 from .device import reduction_threads
 from .geometry import LimitMask, checked_positions, evaluate
 from .kernels import contact as kernels_contact
@@ -352,7 +352,7 @@ class ShellDynamics(Stepper):
                 f"dt = {dt:.6g} exceeds the stability bound {self.stable_dt:.6g} of the {self.scheme} "
                 f"({self.solver.bound_formula(self.omega_max)}, ω = {self.omega_max:.6g} from λ_max(M⁻¹H) by Lanczos): "
                 f"use dt <= {self.stable_dt:.6g}, e.g. dt = {self.safety * self.stable_dt:.6g} (safety {self.safety}), "
-                "or dt=None"
+                f"or {AUTOMATIC_DT}"
             )  # fmt: skip
         if dt != self.dt:
             self.dt = float(dt)

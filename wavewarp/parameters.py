@@ -28,10 +28,13 @@ class SceneError(ValueError):
     """A scene name, parameter or value that cannot be used; the message lists what is valid."""
 
 
-def param(default, help: str, *, choices=(), positive: bool = False, minimum=None, legacy=None):
+def param(default, help: str, *, choices=(), positive: bool = False, minimum=None, legacy=None, auto: bool = False,
+          even: bool = False):  # fmt: skip
     """A scene parameter: its default (which fixes its type), one line of help, what values are valid,
-    and `legacy`, the value a trajectory written before the parameter existed ran with."""
-    check = {"help": help, "choices": tuple(choices), "positive": positive, "minimum": minimum, "legacy": legacy}
+    and `legacy`, the value a trajectory written before the parameter existed ran with. `auto`: a number
+    whose 0 means "chosen automatically"; `--set NAME=auto` gives that 0. `even`: an even integer."""
+    check = {"help": help, "choices": tuple(choices), "positive": positive, "minimum": minimum, "legacy": legacy,
+             "auto": auto, "even": even}  # fmt: skip
     return dataclasses.field(default=default, metadata=check)
 
 
@@ -43,6 +46,8 @@ def fields(kind) -> dict:
 def parse(field: dataclasses.Field, text):
     """`text` as the field's type, checked: SceneError naming the parameter and what is valid."""
     name, kind, check = field.name, type(field.default), field.metadata
+    if check.get("auto") and str(text).strip().lower() == "auto":
+        return kind(0)
     try:
         if kind is bool:
             value = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}[str(text).lower()]
@@ -56,6 +61,7 @@ def parse(field: dataclasses.Field, text):
             value = str(text)
     except (KeyError, ValueError):
         expected = {bool: "true or false", int: "an integer", float: "a finite number"}.get(kind, "text")
+        expected += " or auto" if check.get("auto") else ""
         raise SceneError(f"bad value for {name}: {text!r} (expected {expected})") from None
     if check["choices"] and value not in check["choices"]:
         raise SceneError(f"bad value for {name}: {value!r} (one of {', '.join(map(str, check['choices']))})")
@@ -63,6 +69,8 @@ def parse(field: dataclasses.Field, text):
         raise SceneError(f"bad value for {name}: {value!r} (must be > 0)")
     if check["minimum"] is not None and value < check["minimum"]:
         raise SceneError(f"bad value for {name}: {value!r} (must be >= {check['minimum']})")
+    if check.get("even") and value % 2:
+        raise SceneError(f"bad value for {name}: {value!r} (must be even, e.g. {value + 1})")
     return value
 
 
@@ -98,7 +106,11 @@ def as_dict(p) -> dict:
 
 def help_lines(kind) -> list:
     """One line per parameter: name, default and help (for `wavewarp run SCENE --help`)."""
-    return [f"{name} = {f.default!r}: {f.metadata['help']}" for name, f in fields(kind).items()]
+    return [f"{name} = {_shown(f)}: {f.metadata['help']}" for name, f in fields(kind).items()]
+
+
+def _shown(field: dataclasses.Field) -> str:
+    return "auto" if field.metadata.get("auto") and field.default == 0 else repr(field.default)
 
 
 # ---------------------------------------------------------------- the scene registry

@@ -39,18 +39,18 @@ class TelegraphParameters:
     poisson: float = param(0.33, "Poisson ratio ν")
     gamma: float = param(1.0, "wave speed γ", positive=True)
     alpha: float = param(0.001, "telegraph dissipation α", minimum=0.0)
-    dt: float = param(0.0, "time step; 0 = 0.4 × the rest surface's stability bound, adjusted so the last frame "
-                      "lands on t_end", minimum=0.0)  # fmt: skip
+    dt: float = param(0.0, "time step; auto (0) = 0.4 × the rest surface's stability bound, shrunk so that the frames "
+                      "asked for end on t_end", minimum=0.0, auto=True)  # fmt: skip
     frames: int = param(48, "frames written between t = 0 and t_end", minimum=1)
     sensitive: bool = param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)")
     transport: str = transport_parameter()
     mass_corrections: int = param(0, "Richardson steps from the lumped towards the consistent mass (0: lumped)",
                                   minimum=0)  # fmt: skip
-    relax_every: int = param(0, "chemistry steps per relaxation; 0 = as many as keep the wave within half a control "
-                             "edge between relaxations", minimum=0)  # fmt: skip
-    relax_tol: float = param(0.0, "relaxation tolerance, a residual strain; 0 = the dtype's default", minimum=0.0)
-    relax_iterations: int = param(0, "CG iterations per relaxation before the Newton finish; 0 = 2,000 on a CPU, "
-                                  "20,000 on a GPU", minimum=0)  # fmt: skip
+    relax_every: int = param(0, "chemistry steps per relaxation; auto (0) = as many as keep the wave within half a control "
+                             "edge between relaxations", minimum=0, auto=True)  # fmt: skip
+    relax_tol: float = param(0.0, "relaxation tolerance, a residual strain; auto (0) = the dtype's default", minimum=0.0, auto=True)
+    relax_iterations: int = param(0, "CG iterations per relaxation before the Newton finish; auto (0) = 2,000 on a CPU, "
+                                  "20,000 on a GPU", minimum=0, auto=True)  # fmt: skip
     newton_steps: int = param(NEWTON_STEPS, "Newton steps a relaxation's finish may take", minimum=1)
     relax_method: str = param("auto", "auto: CG, then Newton where CG spends its budget; ncg: CG only; newton: "
                               "Newton only", choices=("auto", "ncg", "newton"))  # fmt: skip
@@ -72,7 +72,7 @@ class SphereParameters(TelegraphParameters):
     level: int = param(4, "icosphere level (level 4: 5,120 triangles)", minimum=1)
     mass_corrections: int = param(2, "Richardson steps from the lumped towards the consistent mass (2: the accurate "
                                   "wave shape and speed)", minimum=0)  # fmt: skip
-    t_end: float = param(0.0, "end time; 0 = the scene's end (π R / γ: the wave's pole-to-pole time)", minimum=0.0)
+    t_end: float = param(0.0, "end time; auto (0) = the scene's end (π R / γ: the wave's pole-to-pole time)", minimum=0.0, auto=True)
     noise: float = param(0.0, "random perturbation / R of the rest shape (seeded by --seed)", minimum=0.0)
 
 
@@ -83,9 +83,9 @@ class BoxParameters(TelegraphParameters):
     edge: float = param(20.0, "L: all edges of the box (L = 20 h)", positive=True)
     thickness: float = param(1.0, "shell thickness h", positive=True)
     width: float = param(math.sqrt(2.0), "pulse width in length units", positive=True)
-    divisions: int = param(24, "control squares per face edge (even)", minimum=2)
-    t_end: float = param(0.0, "end time; 0 = 2.2 L / γ: past the face opposite the origin, until the fronts that meet "
-                         "there have peaked", minimum=0.0)  # fmt: skip
+    divisions: int = param(24, "control squares per face edge (even)", minimum=2, even=True)
+    t_end: float = param(0.0, "end time; auto (0) = 2.2 L / γ: past the face opposite the origin, until the fronts that meet "
+                         "there have peaked", minimum=0.0, auto=True)  # fmt: skip
     AC: float = param(0.2, "metric coupling AC")
     AI: float = param(0.0, "curvature coupling AI")
     mu_v: float = param(0.0, "volume penalty μV in units of Y h / L⁴", minimum=0.0)
@@ -110,7 +110,7 @@ class QuasiStaticWaveRun(WaveClock):
 
     def __init__(self, name: str, mesh: Mesh, p, *, size: float, origin, initial: dict, t_end: float, rule: str = "3",
                  device=None, self_contact: bool = False, adaptive_dt: bool = False, profile=None, measure=None,
-                 figures=None):  # fmt: skip
+                 figures=None, report=print):  # fmt: skip
         self.name, self.mesh, self.p = name, mesh, p
         builder = ModelBuilder(mesh, device=device, dtype=p.dtype, rule=rule)
         builder.add_koiter(thickness=p.thickness, young=p.young, poisson=p.poisson, AC=p.AC, AI=p.AI)
@@ -123,6 +123,8 @@ class QuasiStaticWaveRun(WaveClock):
         try:
             self.model = builder.finalize()
         except ValueError as error:  # self-contact on too coarse a mesh: name the scene's switches
+            if not self_contact:
+                raise
             raise ValueError(f"{error}: raise --set level, or --set self_contact=false") from None
         self.shell = self.model.shell
         self.operator = self.model.operator()
@@ -131,15 +133,17 @@ class QuasiStaticWaveRun(WaveClock):
                                     distance=initial.get("distance", "chord"))  # fmt: skip
         else:
             c0, v0 = steady_front(self.operator, origin, k=initial["k"], delta=initial["delta"], gamma=p.gamma)
+        interval = t_end / p.frames
         dt = p.dt or 0.4 * self.model.wave(self.operator, c0=c0).stable_dt
-        relax_every = p.relax_every or max(1, int(0.5 * mean_edge(mesh) / (p.gamma * dt)))
+        relax_every = p.relax_every or max(1, int(min(0.5 * mean_edge(mesh) / p.gamma, interval) / dt))
         # (1e-9: a resumed run's stored dt and frames give back the same layout despite round-off)
-        self.steps_per_frame = relax_every * max(1, math.ceil(t_end / p.frames / (relax_every * dt) - 1e-9))
+        self.steps_per_frame = relax_every * max(1, math.ceil(interval / (relax_every * dt) - 1e-9))
+        if not p.dt:  # the automatic step shrinks so that the frames asked for end on t_end
+            dt = interval / self.steps_per_frame
         self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
-        if not p.dt:  # the automatic step lands the last frame on t_end: stretched by at most 5%, else shrunk
-            if t_end / (self.steps_per_frame * dt) > 1.05 * self.frames:
-                self.frames += 1
-            dt = t_end / (self.frames * self.steps_per_frame)
+        if self.frames < p.frames:
+            report(f"{self.frames} frames, not the {p.frames} asked for: a frame ends on a relaxation, every "
+                   f"{relax_every} steps of dt = {dt:.4g}; with --set dt=auto every frame is written")  # fmt: skip
         self.wave = self.model.wave(self.operator, c0=c0, v0=v0, dt=dt)
         budget = p.relax_iterations or CG_BUDGET[self.shell.device.is_cuda]
         self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p.sensitive, chemistry_steps=relax_every,
@@ -158,11 +162,12 @@ class QuasiStaticWaveRun(WaveClock):
         if self.adaptive:
             self.series["chemistry_dt"] = ()  # the step a frame's c_t belongs to (resume)
         self.series.update({COUNTER + name: () for name in self._counters()})  # the bookkeeping, for a resume
-        self.field_range = (0.0, 1.0)
         self.size = size
         self.origin = np.asarray(origin, dtype=np.float64)
         self.arrival = ArrivalTimes(self.wave.concentration())
         self.profiles = []  # per frame: (time, profile along the scene's chosen curve), for figures
+        self.concentrations = []  # per frame: the control concentrations, for the run's colour scale (run_range)
+        self.time_unit = f"nondimensional time units (wave speed γ = {p.gamma:g} length units per time unit)"
         self._profile, self._measure, self._figures = profile, measure, {**(figures or {}), "frame": frame_png}
         self.snapshot = None  # (time, positions, c) of the frame nearest t_end / 3, for the rendered frame
         self.front_start = 0.0  # rest arc length of the wave front from the origin at t = 0
@@ -251,6 +256,7 @@ class QuasiStaticWaveRun(WaveClock):
         """Note a written frame for the figures (and, for frames read back on resume, the arrival times)."""
         if stored:
             self.arrival.update(frame["concentration"], time)
+        self.concentrations.append(np.array(frame["concentration"]))
         self.balance.record(time, frame["positions"], frame["concentration"], telegraph_total(*self.invariant, time))
         if self._profile is not None:
             self.profile_time = time
@@ -289,7 +295,7 @@ def sphere_wave_run(name: str, p, *, mesh=None, device=None, seed=0, initial=Non
     """A telegraph wave from the north pole of a quasi-static sphere (oocytes, buckling); `t_end` 0
     ends at `end_fraction` of the pole-to-pole time π R / γ."""
     R = p.radius
-    mesh = scene_mesh(mesh, lambda: icosphere(R, p.level), report)
+    mesh = scene_mesh(mesh, lambda: icosphere(R, p.level), report, size=("level", p.level, icosphere), device=device)
     pole = np.array([0.0, 0.0, R])
     if initial is None:
         initial = {"kind": "gaussian", "sigma": p.width / R, "distance": "arc"}
@@ -298,7 +304,8 @@ def sphere_wave_run(name: str, p, *, mesh=None, device=None, seed=0, initial=Non
     return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial,
                               t_end=p.t_end or end_fraction * math.pi * R / p.gamma, device=device,
                               self_contact=self_contact, adaptive_dt=adaptive_dt, profile=profile or oocyte_profile,
-                              measure=measure or oocyte_measurements, figures=figures or {"kymograph": kymograph_png})  # fmt: skip
+                              measure=measure or oocyte_measurements, figures=figures or {"kymograph": kymograph_png},
+                              report=report)  # fmt: skip
 
 
 def box_wave_run(name: str, p, make_box, origins: dict, *, faces=None, fronts=None, mesh=None, device=None,
@@ -307,8 +314,8 @@ def box_wave_run(name: str, p, make_box, origins: dict, *, faces=None, fronts=No
     With the box's `faces` and exact `fronts` (wavewarp.unfolding) the run also measures and draws
     the imprint on the face opposite the origin (`imprint_measurements`, `imprint_png`)."""
     L = p.edge
-    divisions = p.divisions + p.divisions % 2
-    mesh = scene_mesh(mesh, lambda: make_box(L, divisions), report)
+    mesh = scene_mesh(mesh, lambda: make_box(L, p.divisions), report, size=("divisions", p.divisions, make_box),
+                      device=device)  # fmt: skip
     origin = np.asarray(origins[p.origin], dtype=np.float64) * L
     initial = {"kind": "gaussian", "sigma": p.width / L}
     measure, figures = box_wave_measurements, {"arrival": arrival_map_png}
@@ -317,4 +324,4 @@ def box_wave_run(name: str, p, make_box, origins: dict, *, faces=None, fronts=No
         measure = lambda run: {**box_wave_measurements(run), **imprint_measurements(run, faces, fronts)}  # noqa: E731
         figures["imprint"] = lambda run, path: imprint_png(run, path, faces, fronts)
     return QuasiStaticWaveRun(name, mesh, p, size=L, origin=origin, initial=initial, t_end=p.t_end or 2.2 * L / p.gamma,
-                              rule=p.rule, device=device, measure=measure, figures=figures)  # fmt: skip
+                              rule=p.rule, device=device, measure=measure, figures=figures, report=report)  # fmt: skip

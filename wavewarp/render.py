@@ -25,17 +25,20 @@ def vertex_mean_curvature(mesh: Mesh, surface) -> np.ndarray:
     return value / weight
 
 
-def render(mesh: Mesh, out: str, *, rule="3", device=None, dtype="float32", name="mesh") -> dict:
-    """Write the limit surface of `mesh` to the USD file `out`; returns what `--json` prints (sizes, area,
-    Gauss–Bonnet error, the largest limit-point radius, device, wall time)."""
+def render(mesh: Mesh, out: str, *, rule="3", device=None, dtype="float32", name="mesh", surface="loop",
+           bake_levels=2) -> dict:  # fmt: skip
+    """Write the limit surface of `mesh` to the USD file `out` (`surface` "loop" or "baked" `bake_levels`
+    times, as `UsdAnimation`), coloured by mean curvature on its 1st to 99th percentile; returns what
+    `--json` prints (sizes, area, Gauss–Bonnet error, the largest limit-point radius, device, wall time)."""
     start = time.perf_counter()
-    surface = limit_surface(mesh, rule=rule, device=device, dtype=dtype)
-    curvature = vertex_mean_curvature(mesh, surface)
+    limit = limit_surface(mesh, rule=rule, device=device, dtype=dtype)
+    curvature = vertex_mean_curvature(mesh, limit)
     low, high = np.percentile(curvature, [1, 99])
-    with UsdAnimation(out, mesh.triangles, field_name="meanCurvature", field_range=(low, high)) as usd:
+    with UsdAnimation(out, mesh.triangles, field_name="meanCurvature", field_range=(low, high), surface=surface,
+                      bake_levels=bake_levels) as usd:  # fmt: skip
         usd.add_frame(0.0, {"positions": mesh.vertices, "meanCurvature": curvature})
     points = limit_positions(mesh, device=device, dtype=dtype)
-    return {"mesh": name, "vertices": mesh.n_vertices, "triangles": mesh.n_triangles, "quadrature_points": len(surface.area),
-            "area": surface.total_area, "gauss_bonnet_error": surface.integrate(surface.gauss_curvature) / (4 * np.pi) - 1,
+    return {"mesh": name, "vertices": mesh.n_vertices, "triangles": mesh.n_triangles, "quadrature_points": len(limit.area),
+            "area": limit.total_area, "gauss_bonnet_error": limit.integrate(limit.gauss_curvature) / (4 * np.pi) - 1,
             "max_limit_point_radius": float(np.linalg.norm(points, axis=1).max()), "device": str(resolve_device(device)),
             "dtype": dtype, "wall_time_s": time.perf_counter() - start, "outputs": [out]}  # fmt: skip

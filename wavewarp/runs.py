@@ -3,8 +3,8 @@
 A run (wavewarp/quasistatic.py, wavewarp/walker.py) is what a scene's `build` returns and the
 driver (wavewarp/driver.py) steps: `series` (the HDF5 frames' names and shapes), `frames`,
 `frame()`, `advance_frame()`, `restore(frame)`, `record(time, frame, stored)`, `measurements()`,
-`figures(stem)`, plus `mesh`, `shell`, `operator`, `field_range` and `resolved` (the parameters
-with every automatic value resolved, stored with the trajectory).
+`figures(stem)`, plus `mesh`, `shell`, `operator`, `concentrations` (every frame's, for the colour
+scale) and `resolved` (the parameters with every automatic value resolved, stored with the trajectory).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import numpy as np
 from .chemistry import TRANSPORTS
 from .mesh import Mesh
 from .parameters import param
+from .sizing import check_run_size
 
 
 def transport_parameter():
@@ -22,9 +23,12 @@ def transport_parameter():
                  "amount M c; material keeps the control values", choices=TRANSPORTS, legacy="material")  # fmt: skip
 
 
-def scene_mesh(mesh: Mesh | None, build_default, report=print) -> Mesh:
-    """The scene's own mesh, or `--mesh` refined once where a triangle has two extraordinary vertices."""
-    mesh = build_default() if mesh is None else mesh
+def scene_mesh(mesh: Mesh | None, build_default, report=print, *, size: tuple, device=None) -> Mesh:
+    """The scene's own mesh, `build_default()` once `size` = (parameter name, value, generator) passed
+    the size guard, or `--mesh` refined once where a triangle has two extraordinary vertices."""
+    if mesh is None:
+        check_run_size(*size, device=device)
+        mesh = build_default()
     if mesh.needs_refinement:
         report("the mesh has triangles with two extraordinary vertices: refined once by Loop subdivision")
         mesh = mesh.refined_for_patches()  # renumbered for locality, as the generators' meshes

@@ -20,7 +20,7 @@ from .balance import ChemicalBalance, FirstArrival, arrival_measurements
 from .chemistry import fhn_kinetic_period
 from .coupled import Walking
 from .dynamics import Ground
-from .figures import frame_png, locomotion_png
+from .figures import FHN_TIME_UNIT, frame_png, locomotion_png
 from .geometry import limit_positions, limit_surface
 from .initial import gaussian_pulse
 from .measurements import locomotion
@@ -29,6 +29,7 @@ from .model import ModelBuilder
 from .parameters import as_dict, param
 from .runs import WaveClock, mean_edge, scene_mesh, transport_parameter
 
+AUTO_DT_SAFETY = 0.4  # dt=auto: this fraction of the chemistry's stability bound on the settled shell
 TRACE_COLUMNS = 8  # t, c at the origin vertex, centre of mass (3), the origin vertex's position (3)
 
 
@@ -46,23 +47,24 @@ class WalkerParameters:
     nu: float = param(-0.01, "FHN threshold ν (< 0: the medium oscillates)")
     kappa: float = param(1e-4, "FHN κ", minimum=0.0)
     epsilon: float = param(0.005, "FHN ε", minimum=0.0)
-    width: float = param(0.0, "width of the initial Gaussian (length); 0 = 1.5 mean control edges", minimum=0.0)
+    width: float = param(0.0, "width of the initial Gaussian (length); auto (0) = 1.5 mean control edges", minimum=0.0, auto=True)
     density: float = param(0.01, "surface mass density ρ", positive=True)
     gravity: float = param(0.5, "gravity g", minimum=0.0)
     stiffness: float = param(10.0, "ground contact stiffness k", minimum=0.0)
     contact_damping: float = param(0.5, "ground contact damping β", minimum=0.0)
     contact: str = param("point", "point: k and β per limit point of a control vertex; area: a pressure on the limit "
                          "surface (converges under refinement)", choices=("point", "area"))  # fmt: skip
-    contact_area: float = param(0.0, "area contact: the area a per point of k and β; 0 = the mean rest area per control "
-                                "vertex", minimum=0.0)  # fmt: skip
+    contact_area: float = param(0.0, "area contact: the area a per point of k and β; auto (0) = the mean rest area per control "
+                                "vertex", minimum=0.0, auto=True)  # fmt: skip
     friction: float = param(0.1, "friction coefficient μ", minimum=0.0)
     sharpness: float = param(0.1, "friction regularisation k_f", minimum=0.0)
     damping: float = param(0.2, "damping η of the vibrations relative to the rigid-body motion (inertial mechanics)",
                            minimum=0.0)  # fmt: skip
     mechanics: str = param("inertial", "inertial: symplectic Euler with lumped mass; overdamped: the mobility model "
                            "ζ M v = F", choices=("inertial", "overdamped"))  # fmt: skip
-    drag: float = param(0.0, "overdamped mechanics: drag ζ per unit mass; 0 = 2 η_ground", minimum=0.0)
-    dt: float = param(0.5, "chemistry step (explicit FHN)", positive=True)
+    drag: float = param(0.0, "overdamped mechanics: drag ζ per unit mass; auto (0) = 2 η_ground", minimum=0.0, auto=True)
+    dt: float = param(0.5, "chemistry step (explicit FHN); auto (0) = 0.4 × the settled shell's stability bound, or "
+                      "less where frames asks for more frames", minimum=0.0, auto=True)  # fmt: skip
     mass_corrections: int = param(2, "Richardson steps from the lumped towards the consistent mass in the diffusion",
                                   minimum=0)  # fmt: skip
     ramp: bool = param(True, "the active reference follows c linearly over each chemistry step's mechanics substeps")
@@ -115,7 +117,7 @@ class WalkerRun(WaveClock):
     """
 
     def __init__(self, name: str, mesh: Mesh, p, *, radius: float, size: float, origin, bilayer: bool = False,
-                 rule: str = "3", device=None):  # fmt: skip
+                 rule: str = "3", device=None, report=print):  # fmt: skip
         area = limit_surface(mesh, device="cpu", dtype="float64").area.sum()
         weight = p.density * p.gravity * area
         per = 1.0
@@ -154,11 +156,12 @@ class WalkerRun(WaveClock):
         self.operator = self.model.operator(settled if p.sensitive else None, assembled=not p.sensitive)
         width = p.width or 1.5 * mean_edge(mesh)
         c0, _ = gaussian_pulse(self.operator, self.origin_vertex, width / radius, gamma=p.gamma, radius=radius)
-        self.wave = self.model.wave(self.operator, c0=c0, dt=p.dt)
+        t_end = p.periods * self.period_kinetic
+        dt = p.dt or min(AUTO_DT_SAFETY * self.model.wave(self.operator, c0=c0).stable_dt, t_end / p.frames)
+        self.wave = self.model.wave(self.operator, c0=c0, dt=dt)
         self.initial_total = self.wave.total()
         self.balance = ChemicalBalance(mesh, sensitive=p.sensitive, rule=rule, device=device, dtype=p.dtype)
         self.arrival = FirstArrival(c0, device=self.shell.device, scalar=self.shell.scalar)
-        t_end = p.periods * self.period_kinetic
         self.steps_per_frame = max(1, round(t_end / p.frames / self.wave.dt))
         with wp.ScopedDevice(self.shell.device):
             self._trace_row = wp.zeros(1, dtype=wp.int32)
@@ -166,19 +169,23 @@ class WalkerRun(WaveClock):
         self.coupled = Walking(self.dynamics, self.wave, sensitive=p.sensitive, recorder=self._record_trace_row,
                                ramp=p.ramp)  # fmt: skip
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
+        if self.frames < p.frames:
+            report(f"{self.frames} frames, not the {p.frames} asked for: a frame holds whole chemistry steps of dt = "
+                   f"{dt:.4g} over {t_end:.4g}; --set dt=auto (or a smaller dt) gives every frame")  # fmt: skip
         drag = self.dynamics.drag if p.mechanics == "overdamped" else 0.0
-        resolved = replace(p, width=width, drag=drag, contact_area=per if p.contact == "area" else 0.0)
+        resolved = replace(p, width=width, drag=drag, dt=dt, contact_area=per if p.contact == "area" else 0.0)
         self.resolved = {**as_dict(resolved), "mechanics_dt": self.dynamics.dt, "substeps": self.coupled.substeps,
                          "period_kinetic": self.period_kinetic}  # fmt: skip
         n = mesh.n_vertices
         self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
                        "reaction_amount": (), "reaction_per_vertex": (n,), "first_arrival": (n,),
                        "trace": (self.steps_per_frame, TRACE_COLUMNS)}  # fmt: skip
-        self.field_range = (0.0, 1.0)
         self.ground_size = 8.0 * radius
         self.trace = np.empty((0, TRACE_COLUMNS))  # every chemistry step: t, c_origin, centre of mass, origin
         self._frame_trace = np.repeat(self._sample()[None], self.steps_per_frame, axis=0)
         self.snapshot = None
+        self.concentrations = []  # per frame: the control concentrations, for the run's colour scale (run_range)
+        self.time_unit = FHN_TIME_UNIT
 
     def _bound_over_reference_range(self) -> None:
         """ω for the mechanics' bound: the largest over the uniform references c = 0, c = 1 and the
@@ -228,8 +235,9 @@ class WalkerRun(WaveClock):
 
     def record(self, time: float, frame: dict, stored: bool = False) -> None:
         """Append the frame's trace rows (new times only), check the chemical's balance (C(0) plus the
-        reaction's amount) and keep the snapshot for the rendered frame."""
+        reaction's amount) and keep the concentrations and the snapshot for the rendered frame."""
         del stored  # written and resumed frames carry the same trace
+        self.concentrations.append(np.array(frame["concentration"]))
         self.balance.record(time, frame["positions"], frame["concentration"],
                             self.initial_total + float(frame["reaction_amount"]))  # fmt: skip
         rows = np.asarray(frame["trace"])
@@ -256,8 +264,9 @@ def sphere_walker_run(name: str, p, *, mesh=None, device=None, bilayer=False, re
     """The sphere walker: the icosphere rests on the vertex at its south pole (its coordinate planes
     are mirror planes), the wave starts on the equator at -x (mirrored: +x)."""
     R = p.radius
-    mesh = scene_mesh(mesh, lambda: icosphere(R, p.level), report)
-    return WalkerRun(name, mesh, p, radius=R, size=R, origin=[-R, 0.0, 0.0], bilayer=bilayer, device=device)
+    mesh = scene_mesh(mesh, lambda: icosphere(R, p.level), report, size=("level", p.level, icosphere), device=device)
+    return WalkerRun(name, mesh, p, radius=R, size=R, origin=[-R, 0.0, 0.0], bilayer=bilayer, device=device,
+                     report=report)  # fmt: skip
 
 
 def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis_to_x=False, mesh=None, device=None,
@@ -268,11 +277,11 @@ def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis
     L = p.edge
 
     def build():
-        box = make_box(L, p.divisions + p.divisions % 2)
+        box = make_box(L, p.divisions)
         if axis_to_x:  # (x, y, z) -> (z, x, y): axis along x, the square face at -y down
             box = Mesh(box.vertices[:, [2, 0, 1]], box.triangles)
         return box
 
-    mesh = scene_mesh(mesh, build, report)
+    mesh = scene_mesh(mesh, build, report, size=("divisions", p.divisions, make_box), device=device)
     origin = np.asarray(origins[p.origin], dtype=np.float64) * L
-    return WalkerRun(name, mesh, p, radius=radius, size=L, origin=origin, rule=p.rule, device=device)
+    return WalkerRun(name, mesh, p, radius=radius, size=L, origin=origin, rule=p.rule, device=device, report=report)

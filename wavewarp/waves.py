@@ -16,7 +16,7 @@ import math
 import numpy as np
 import warp as wp
 
-from .checks import finite, positive
+from .checks import AUTOMATIC_DT, finite, positive
 from .chemistry import FLIP_STEPS, FitzHughNagumoSolver, TelegraphSolver
 from .kernels import laplace as kernels_laplace
 from .kernels import waves as kernels_waves
@@ -91,7 +91,7 @@ class _Stepper(Stepper):
                     f"dt = {dt:.6g} exceeds the stability bound {bound:.6g} of the {self.scheme} "
                     f"({self.bound_formula}, λ_max(M⁻¹K) = {self.largest_eigenvalue:.6g} by power iteration): "
                     f"use dt <= {bound:.6g}, e.g. dt = {self.safety * bound:.6g} "
-                    f"(safety {self.safety}), or dt=None to choose it automatically"
+                    f"(safety {self.safety}), or {AUTOMATIC_DT}"
                 )
         if dt != self.dt:
             self.dt = dt
@@ -145,7 +145,7 @@ class _Stepper(Stepper):
                 f"every step for {FLIP_STEPS} steps at some vertex, above {self.solver.flip_floor:.3g} and not "
                 f"decaying. This bounded oscillation (no NaN, no runaway value) is the instability of a time step "
                 f"too large for the state: dt = {self.dt:.6g} against the stability bound {bound:.6g} "
-                f"({self.bound_formula}); {restored}. Reduce dt, e.g. to {self.safety * bound:.6g}, or use dt=None",
+                f"({self.bound_formula}); {restored}. Reduce dt, e.g. to {self.safety * bound:.6g}, or {AUTOMATIC_DT}",
                 self.time,
                 self.steps,
             )
