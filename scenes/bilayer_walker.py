@@ -9,5 +9,4 @@ DESCRIPTION = "bilayer walker: the sphere walker with the bilayer shell model (Ä
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
-    del seed  # deterministic
-    return sphere_walker_run(NAME, p, mesh=mesh, device=device, bilayer=True, report=report)
+    return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, bilayer=True, report=report)

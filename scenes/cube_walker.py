@@ -30,5 +30,5 @@ QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}  # --quick: a smoke test a
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
-    del seed  # deterministic
-    return box_walker_run(NAME, p, cube, ORIGINS, radius=p.edge / L_OVER_R, mesh=mesh, device=device, report=report)
+    return box_walker_run(NAME, p, cube, ORIGINS, radius=p.edge / L_OVER_R, mesh=mesh, device=device, seed=seed,
+                          report=report)  # fmt: skip

@@ -31,6 +31,5 @@ QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}  # --quick: a smoke test a
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
-    del seed  # deterministic
-    return box_walker_run(NAME, p, prism, ORIGINS, radius=p.edge / L_OVER_R, axis_to_x=True, mesh=mesh,
+    return box_walker_run(NAME, p, prism, ORIGINS, seed=seed, radius=p.edge / L_OVER_R, axis_to_x=True, mesh=mesh,
                           device=device, report=report)  # fmt: skip

@@ -21,5 +21,4 @@ QUICK = {"level": 2, "periods": 2.2, "frames": 4}  # --quick: a smoke test at le
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
-    del seed  # deterministic
-    return sphere_walker_run(NAME, p, mesh=mesh, device=device, report=report)
+    return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, report=report)

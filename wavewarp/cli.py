@@ -23,6 +23,7 @@ from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
 from .relax import RelaxationError
 from .sizing import check_run_size
+from .sweep import SweepSpec, parse_grid, sweep
 from .render import render
 from .trajectory import TrajectoryWriter, read_frames, stored_parameters
 from .usd import UsdAnimation
@@ -105,6 +106,23 @@ def _scene_run(args) -> int:
         state = "interrupted; kept" if outcome.interrupted else "wrote"
         print(f"{state} {outcome.frames} frames to {', '.join(outputs)} ({summary['wall_time_s']:.1f} s, {run.steps} wave steps)")
     return 130 if outcome.interrupted else 0
+
+
+def _sweep(args) -> int:
+    wp.config.log_level = wp.LOG_WARNING
+    spec = SweepSpec(args.scene, grid=parse_grid(args.grid), seeds=args.seeds, fixed=tuple(args.set), quick=args.quick,
+                     device=args.device, h5=args.h5, measure=args.measure)  # fmt: skip
+    start = time.perf_counter()
+
+    def report(message):
+        print(f"wavewarp sweep {args.scene}: {message}", file=sys.stderr)
+
+    rows = sweep(spec, args.out, batch=args.batch, workers=args.workers, scheduler=args.scheduler,
+                 progress=sys.stderr.isatty(), report=report)  # fmt: skip
+    counts = {status: sum(row["status"] == status for row in rows) for status in ("done", "stopped", "failed")}
+    print(f"{len(rows)} points in {args.out} ({', '.join(f'{n} {s}' for s, n in counts.items())}): table.csv, chart.png "
+          f"({time.perf_counter() - start:.1f} s)")  # fmt: skip
+    return 0
 
 
 def _build_mesh(args):
@@ -197,6 +215,23 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--resume", action="store_true", help="continue the run stored in --h5")
     run.add_argument("--json", action="store_true", help="print one JSON object with the results")
     run.set_defaults(run=_scene_run)
+    grid = commands.add_parser("sweep", help="run a scene over a grid of parameter values and seeds (Dask)")
+    grid.add_argument("scene", help="a scene name (wavewarp list) or the path of a scene script")
+    grid.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
+                      help="a swept parameter and its values (repeat for a grid)")  # fmt: skip
+    grid.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a parameter fixed for all points")
+    grid.add_argument("--seeds", type=int, default=1, help="seeds 0 … K-1 at every grid point (default 1)")
+    grid.add_argument("--batch", type=int, default=1, help="points per task, run one after another by a worker")
+    grid.add_argument("--out", required=True, help="folder of the results (DIR/points/*.json, table.csv, chart.png)")
+    grid.add_argument("--device", default=None, choices=("cpu", "cuda"),
+                      help="cpu, or cuda (one worker per GPU); default: CUDA when present")  # fmt: skip
+    grid.add_argument("--workers", type=int, default=None, help="CPU workers of the local cluster (default: one per core)")
+    grid.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                      help="an existing Dask scheduler (tcp://host:8786) instead of a local cluster")  # fmt: skip
+    grid.add_argument("--quick", action="store_true", help="the scene's reduced run at every point")
+    grid.add_argument("--h5", action="store_true", help="also keep every point's trajectory (DIR/points/*.h5)")
+    grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first)")
+    grid.set_defaults(run=_sweep)
     draw = commands.add_parser("render", help="draw a mesh's Loop limit surface to USD, coloured by mean curvature")
     draw.add_argument("--mesh", default="icosphere", help="icosphere, cube, prism or a mesh file (default icosphere)")
     draw.add_argument("--level", type=int, default=3, help="icosphere level, or cube/prism divisions / 2 (default 3)")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import threading
 from dataclasses import dataclass, field
 
 from tqdm import tqdm
@@ -51,7 +52,8 @@ def simulate(run, writers, *, progress: bool = False, replay=(), replay_writers=
     file). With `figures_stem` the run's figures of the frames kept are written as STEM_NAME.png.
     SIGTERM stops the run as Ctrl-C does, keeping the frames so far."""
     outcome = Outcome()
-    signal.signal(signal.SIGTERM, _terminate)
+    if threading.current_thread() is threading.main_thread():  # (a sweep's worker runs it in a thread)
+        signal.signal(signal.SIGTERM, _terminate)
     bar = tqdm(total=run.frames, desc=getattr(run, "name", "run"), unit="frame", disable=not progress, leave=False)
     try:
         with contextlib.ExitStack() as stack:

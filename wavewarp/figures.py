@@ -371,3 +371,76 @@ def locomotion_figure(runs, title: str = "walkers: displacement against time (pa
 
 def locomotion_png(runs, path, title: str = "walkers: displacement against time (paper Fig. 3a)") -> None:
     write_png(locomotion_figure(runs, title), path)
+
+
+SWEEP_COLUMNS = ("point", "seed", "status", "frames", "wall_time_s", "device", "time")
+
+
+def _number(text):
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return None
+
+
+def sweep_measure(rows, grid: list, measure: str | None) -> str | None:
+    """The measurement a sweep chart shows: `measure`, else the first measurement that differs between
+    points (else the first)."""
+    if measure is not None:
+        return measure
+    columns = list(dict.fromkeys(k for row in rows for k in row if k not in SWEEP_COLUMNS and k not in grid))
+    varying = [k for k in columns if len({row.get(k) for row in rows}) > 1]
+    return (varying or columns or [None])[0]
+
+
+def sweep_chart_figure(rows, grid: list, measure: str | None, title: str = "sweep"):
+    """A measurement over a sweep's grid, the seeds' mean with their range: against the one grid
+    parameter; as a table-like heat map of two; against the first, one line per combination of
+    the others, for more."""
+    measure = sweep_measure(rows, grid, measure)
+    done = [row for row in rows if measure is not None and isinstance(row.get(measure), (int, float))
+            and np.isfinite(row[measure])]  # fmt: skip
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    ax.set_title(f"{title}: {measure} over {len(done)} of {len(rows)} points", fontsize=10)
+    if not done:
+        _say(ax, f"No point has a value of {measure!r} yet ({len(rows)} results): see table.csv for their status.")
+        return fig
+    groups = {}
+    for row in done:
+        groups.setdefault(tuple(str(row[name]) for name in grid), []).append(row[measure])
+    if len(grid) == 2:
+        xs, ys = list(dict.fromkeys(k[0] for k in groups)), list(dict.fromkeys(k[1] for k in groups))
+        image = np.full((len(ys), len(xs)), np.nan)
+        for (x, y), values in groups.items():
+            image[ys.index(y), xs.index(x)] = np.mean(values)
+        shown = ax.imshow(image, origin="lower", aspect="auto", cmap=COLOUR_MAP)
+        for (j, i), value in np.ndenumerate(image):
+            if np.isfinite(value):
+                ax.text(i, j, f"{value:.3g}", ha="center", va="center", fontsize=7, color="w")
+        ax.set_xticks(range(len(xs)), xs)
+        ax.set_yticks(range(len(ys)), ys)
+        ax.set_xlabel(grid[0])
+        ax.set_ylabel(grid[1])
+        fig.colorbar(shown, label=f"{measure} (mean over seeds)")
+        return fig
+    lines = {}
+    for key, values in groups.items():
+        lines.setdefault(key[1:], []).append((key[0] if key else "", values))
+    for rest, series in lines.items():
+        positions = [_number(x) for x, _ in series]
+        xs = positions if all(x is not None for x in positions) else list(range(len(series)))
+        means = [np.mean(v) for _, v in series]
+        spread = np.array([[m - min(v), max(v) - m] for m, (_, v) in zip(means, series)]).T
+        label = ", ".join(f"{n}={v}" for n, v in zip(grid[1:], rest)) or None
+        ax.errorbar(xs, means, yerr=spread, marker="o", capsize=3, label=label)
+        if xs != positions:
+            ax.set_xticks(xs, [x for x, _ in series])
+    ax.set_xlabel(grid[0] if grid else "")
+    ax.set_ylabel(f"{measure} (mean; bars: range over seeds)")
+    if len(lines) > 1:
+        ax.legend(fontsize=8)
+    return fig
+
+
+def sweep_chart_png(rows, grid: list, measure: str | None, path, title: str = "sweep") -> None:
+    write_png(sweep_chart_figure(rows, grid, measure, title), path)

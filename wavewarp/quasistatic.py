@@ -27,7 +27,7 @@ from .mesh import Mesh, icosphere
 from .model import ModelBuilder
 from .parameters import as_dict, param
 from .relax import NEWTON_STEPS
-from .runs import WaveClock, mean_edge, scene_mesh, seeded_noise, transport_parameter
+from .runs import WaveClock, imperfect, mean_edge, scene_mesh, transport_parameter
 from .waves import BlowUpError, TimeStepError
 
 
@@ -299,8 +299,7 @@ def sphere_wave_run(name: str, p, *, mesh=None, device=None, seed=0, initial=Non
     pole = np.array([0.0, 0.0, R])
     if initial is None:
         initial = {"kind": "gaussian", "sigma": p.width / R, "distance": "arc"}
-    if p.noise > 0:  # an imperfection of the rest shape: perturbed positions alone relax back at t = 0
-        mesh = Mesh(seeded_noise(mesh, p.noise * R, seed), mesh.triangles)
+    mesh = imperfect(mesh, p.noise * R, seed)  # an imperfection of the rest shape (perturbed positions alone relax back)
     return QuasiStaticWaveRun(name, mesh, p, size=R, origin=pole, initial=initial,
                               t_end=p.t_end or end_fraction * math.pi * R / p.gamma, device=device,
                               self_contact=self_contact, adaptive_dt=adaptive_dt, profile=profile or oocyte_profile,

@@ -49,6 +49,11 @@ def seeded_noise(mesh: Mesh, amplitude: float, seed: int) -> np.ndarray:
     return mesh.vertices + amplitude * noise
 
 
+def imperfect(mesh: Mesh, amplitude: float, seed: int) -> Mesh:
+    """The mesh with its positions perturbed by `seeded_noise` (itself where `amplitude` is 0)."""
+    return Mesh(seeded_noise(mesh, amplitude, seed), mesh.triangles) if amplitude > 0 else mesh
+
+
 class WaveClock:
     """A run's time and step count are its wave's."""
 

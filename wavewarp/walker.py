@@ -27,7 +27,7 @@ from .measurements import locomotion
 from .mesh import Mesh, icosphere
 from .model import ModelBuilder
 from .parameters import as_dict, param
-from .runs import WaveClock, mean_edge, scene_mesh, transport_parameter
+from .runs import WaveClock, imperfect, mean_edge, scene_mesh, transport_parameter
 
 AUTO_DT_SAFETY = 0.4  # dt=auto: this fraction of the chemistry's stability bound on the settled shell
 TRACE_COLUMNS = 8  # t, c at the origin vertex, centre of mass (3), the origin vertex's position (3)
@@ -72,6 +72,8 @@ class WalkerParameters:
     settle: float = param(40.0, "time on the ground before the wave starts, c = 0", minimum=0.0)
     periods: float = param(4.0, "run length in periods T₀ of the FHN kinetics", positive=True)
     frames: int = param(48, "frames written between t = 0 and the end", minimum=1)
+    noise: float = param(0.0, "random perturbation / R of the rest shape (seeded by --seed): an ensemble of gaits",
+                         minimum=0.0)  # fmt: skip
     sensitive: bool = param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)")
     transport: str = transport_parameter()
     mirror: bool = param(False, "start the wave at the mirror image of the origin (x → -x)")
@@ -260,17 +262,18 @@ class WalkerRun(WaveClock):
         return paths
 
 
-def sphere_walker_run(name: str, p, *, mesh=None, device=None, bilayer=False, report=print) -> WalkerRun:
+def sphere_walker_run(name: str, p, *, mesh=None, device=None, bilayer=False, seed=0, report=print) -> WalkerRun:
     """The sphere walker: the icosphere rests on the vertex at its south pole (its coordinate planes
     are mirror planes), the wave starts on the equator at -x (mirrored: +x)."""
     R = p.radius
     mesh = scene_mesh(mesh, lambda: icosphere(R, p.level), report, size=("level", p.level, icosphere), device=device)
+    mesh = imperfect(mesh, p.noise * R, seed)
     return WalkerRun(name, mesh, p, radius=R, size=R, origin=[-R, 0.0, 0.0], bilayer=bilayer, device=device,
                      report=report)  # fmt: skip
 
 
 def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis_to_x=False, mesh=None, device=None,
-                   report=print) -> WalkerRun:  # fmt: skip
+                   seed=0, report=print) -> WalkerRun:  # fmt: skip
     """A box walker resting on a face: `make_box(L, divisions)` centred at 0 (`axis_to_x`: a prism,
     turned so that its axis lies along x and a square face down); the wave starts at
     origins[p.origin] × L (in the turned frame)."""
@@ -282,6 +285,7 @@ def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis
             box = Mesh(box.vertices[:, [2, 0, 1]], box.triangles)
         return box
 
-    mesh = scene_mesh(mesh, build, report, size=("divisions", p.divisions, make_box), device=device)
+    mesh = imperfect(scene_mesh(mesh, build, report, size=("divisions", p.divisions, make_box), device=device),
+                     p.noise * radius, seed)  # fmt: skip
     origin = np.asarray(origins[p.origin], dtype=np.float64) * L
     return WalkerRun(name, mesh, p, radius=radius, size=L, origin=origin, rule=p.rule, device=device, report=report)

@@ -1,0 +1,135 @@
+"""Sweeps (docs/theory/sweeps.md): grid points, each point's result equal to the single run with its
+settings, re-runs that compute only what is missing, failures that stop one point alone, and a
+Dask cluster killed midway."""
+
+import concurrent.futures
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from wavewarp import cli, walker
+from wavewarp.mesh import icosphere
+from wavewarp.parameters import SceneError, load_scene, resolve
+from wavewarp.sweep import Point, SweepSpec, grid_points, parse_grid, sweep
+
+QUICK_CUBE = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True, device="cpu")
+
+
+class CountingExecutor(concurrent.futures.ThreadPoolExecutor):
+    """One worker thread, counting the points it was given."""
+
+    def __init__(self):
+        super().__init__(max_workers=1)
+        self.points = 0
+
+    def submit(self, function, spec, points, out):
+        self.points += len(points)
+        return super().submit(function, spec, points, out)
+
+
+def test_grid_points_vary_the_first_parameter_slowest_and_the_seed_fastest():
+    grid = parse_grid(["AC=0,0.1", "sensitive=true,false"])
+    assert grid == {"AC": ["0", "0.1"], "sensitive": ["true", "false"]}
+    points = grid_points(SweepSpec("starfish", grid=grid, seeds=2))
+    assert len(points) == 8 and points[0] == Point((("AC", "0"), ("sensitive", "true")), 0)
+    assert [p.seed for p in points[:2]] == [0, 1] and points[2].values == (("AC", "0"), ("sensitive", "false"))
+    assert points[-1].name == "AC=0.1_sensitive=false_seed=1"
+
+
+@pytest.mark.parametrize("items, message", [(["AC"], "--grid needs NAME=v1,v2"), (["AC=0,,1"], "no empty value"),
+                                            (["AC=0", "AC=1"], "--grid AC is given twice")])  # fmt: skip
+def test_bad_grids_are_named(items, message):
+    with pytest.raises(ValueError, match=message):
+        parse_grid(items)
+
+
+def test_bad_points_are_refused_before_anything_runs(tmp_path):
+    with pytest.raises(SceneError, match="unknown parameter 'bogus' in --grid"):
+        sweep(SweepSpec("cube-waves", grid={"bogus": ["1"]}), str(tmp_path), executor=CountingExecutor())
+    with pytest.raises(SceneError, match="bad value for gamma: 'fast'"):
+        sweep(SweepSpec("cube-waves", grid={"gamma": ["1", "fast"]}), str(tmp_path), executor=CountingExecutor())
+    with pytest.raises(SceneError, match="gamma is both swept"):
+        sweep(SweepSpec("cube-waves", grid={"gamma": ["1"]}, fixed=("gamma=2",)), str(tmp_path), executor=CountingExecutor())
+    assert not os.path.exists(tmp_path / "points")
+
+
+def test_each_point_equals_its_single_run_and_a_rerun_computes_only_the_missing(tmp_path, capsys):
+    out = str(tmp_path / "sweep")
+    pool = CountingExecutor()
+    rows = sweep(QUICK_CUBE, out, executor=pool, batch=3)
+    assert pool.points == 4 and [row["status"] for row in rows] == ["done"] * 4
+    with open(os.path.join(out, "table.csv")) as f:
+        table = list(csv.DictReader(f))
+    assert [row["point"] for row in table] == [p.name for p in grid_points(QUICK_CUBE)]
+    assert os.path.getsize(os.path.join(out, "chart.png")) > 0
+    # the single run of one point, through the command line: the same measurements, bit for bit
+    capsys.readouterr()
+    code = cli.main(["run", "cube-waves", "--quick", "--device", "cpu", "--set", "gamma=0.8", "--json",
+                     "--out", str(tmp_path / "single.usda")])  # fmt: skip
+    single = json.loads(capsys.readouterr().out)
+    with open(os.path.join(out, "points", "gamma=0.8_seed=0.json")) as f:
+        point = json.load(f)
+    assert code == 0 and point["measurements"] == {k: single[k] for k in point["measurements"]}
+    assert point["frames"] == single["frames"] and point["steps"] == single["steps"]
+    # lose one result (as a kill would): the re-run computes that point alone
+    os.remove(os.path.join(out, "points", "gamma=1.0_seed=1.json"))
+    before = os.path.getmtime(os.path.join(out, "points", "gamma=0.8_seed=0.json"))
+    again = CountingExecutor()
+    assert len(sweep(QUICK_CUBE, out, executor=again)) == 4 and again.points == 1
+    assert os.path.getmtime(os.path.join(out, "points", "gamma=0.8_seed=0.json")) == before
+    with pytest.raises(ValueError, match="holds another sweep"):
+        sweep(SweepSpec("cube-waves", grid={"gamma": ["2"]}, quick=True), out, executor=CountingExecutor())
+
+
+def test_a_failing_point_stops_alone(tmp_path):
+    spec = SweepSpec("cube-waves", grid={"dt": ["auto", "50"]}, quick=True, device="cpu")
+    rows = sweep(spec, str(tmp_path), executor=CountingExecutor())
+    status = {row["point"]: row["status"] for row in rows}
+    assert status["dt=auto_seed=0"] == "done" and status["dt=50_seed=0"] in ("stopped", "failed")
+    with open(tmp_path / "points" / "dt=50_seed=0.json") as f:
+        result = json.load(f)
+    assert "stability bound" in (result.get("stopped") or result.get("error"))
+
+
+@pytest.mark.slow
+def test_a_dask_sweep_killed_midway_resumes_with_the_missing_points(tmp_path):
+    """A local Dask cluster (one CPU worker) runs 4 starfish points; the sweep's process group is
+    killed once the first result exists; the re-run computes only the points without one."""
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "wavewarp.cli", "sweep", "starfish", "--quick", "--grid", "gamma=0.8,0.9,1.0,1.1",
+               "--device", "cpu", "--workers", "1", "--out", str(out)]  # fmt: skip
+    first = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    while not (out / "points").is_dir() or not any(name.endswith(".json") for name in os.listdir(out / "points")):
+        assert first.poll() is None, first.communicate()
+        time.sleep(0.1)
+    os.killpg(first.pid, signal.SIGKILL)
+    first.wait()
+    kept = sorted(name for name in os.listdir(out / "points") if name.endswith(".json"))
+    assert 1 <= len(kept) < 4
+    times = {name: os.path.getmtime(out / "points" / name) for name in kept}
+    again = subprocess.run(command, capture_output=True, text=True, check=True)
+    assert f"{len(kept)} of 4 points already done; running {4 - len(kept)}" in again.stderr
+    assert "4 points in" in again.stdout and "(4 done" in again.stdout
+    assert {name: os.path.getmtime(out / "points" / name) for name in kept} == times
+
+
+def test_walker_seeds_perturb_the_rest_shape(monkeypatch):
+    """A walker's seed matters once noise > 0 (an ensemble of gaits); noise 0 keeps the scene's mesh."""
+    built = []
+    monkeypatch.setattr(walker, "WalkerRun", lambda name, mesh, p, **options: built.append(mesh))
+    module = load_scene("sphere-walker")
+    noisy = resolve(module.Parameters, module.QUICK, ["noise=1e-3"])
+    for seed in (1, 2):
+        module.build(noisy, seed=seed)
+    module.build(resolve(module.Parameters, module.QUICK), seed=3)
+    sphere = icosphere(noisy.radius, noisy.level)
+    first, second = (mesh.vertices - sphere.vertices for mesh in built[:2])
+    assert 0.5e-3 < np.std(first) / noisy.radius < 2e-3 and not np.allclose(first, second)
+    assert np.array_equal(built[2].vertices, sphere.vertices)

@@ -1,0 +1,254 @@
+"""Parameter sweeps (docs/theory/sweeps.md): a scene run at every point of a grid of parameter
+values and seeds, in batches on any `concurrent.futures.Executor`; by default an embedded Dask
+cluster with one worker per GPU, or per CPU core.
+
+    spec = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True)
+    table = sweep(spec, "out/", executor=None, batch=1)      # None: a local Dask cluster
+
+Every point's result is written atomically to DIR/points/POINT.json as soon as it is computed,
+so a killed sweep loses only the points being computed; running the same sweep into the same
+DIR again computes only the points without a result. At the end the sweep writes DIR/table.csv
+(a row per point) and DIR/chart.png (a measurement against the grid).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import contextlib
+import csv
+import itertools
+import json
+import logging
+import os
+import re
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+
+import warp as wp
+from distributed import Client, Nanny, Scheduler, SpecCluster
+from tqdm import tqdm
+
+from .device import init_warp
+from .driver import FAILURES, simulate
+from .figures import sweep_chart_png
+from .io import atomic_path, write_json
+from .parameters import SceneError, fields, load_scene, resolve
+from .trajectory import TrajectoryWriter
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What a sweep runs: the scene, `grid` (parameter name -> the values' text, in order), `seeds`
+    (0 … seeds-1 at every grid point), `fixed` NAME=VALUE settings for every point, `quick` (the
+    scene's reduced run), `device` ("cpu", "cuda" or None: the worker's choice), `h5` (a trajectory
+    per point) and `measure`, the measurement the chart shows (None: the first numeric one)."""
+
+    scene: str
+    grid: dict = field(default_factory=dict)
+    seeds: int = 1
+    fixed: tuple = ()
+    quick: bool = False
+    device: str | None = None
+    h5: bool = False
+    measure: str | None = None
+
+    def definition(self) -> dict:
+        """What identifies the sweep's points and results (not how or where they run)."""
+        return {"scene": self.scene, "grid": self.grid, "seeds": self.seeds, "fixed": list(self.fixed),
+                "quick": self.quick}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Point:
+    """One run of a sweep: the grid values (NAME, text) and the seed."""
+
+    values: tuple
+    seed: int
+
+    @property
+    def name(self) -> str:
+        """A file name: NAME=VALUE parts and the seed, characters outside [A-Za-z0-9.=+-] replaced."""
+        parts = [f"{name}={value}" for name, value in self.values] + [f"seed={self.seed}"]
+        return re.sub(r"[^A-Za-z0-9.=+-]", "_", "_".join(parts))
+
+    def overrides(self) -> list:
+        return [f"{name}={value}" for name, value in self.values]
+
+
+def parse_grid(items) -> dict:
+    """`--grid NAME=v1,v2,...` items as {NAME: [v1, v2, ...]} (ValueError naming the bad item)."""
+    grid = {}
+    for item in items:
+        name, sep, text = str(item).partition("=")
+        name, values = name.strip(), [v.strip() for v in text.split(",")]
+        if not sep or not name or not all(values):
+            raise ValueError(f"--grid needs NAME=v1,v2,... with no empty value, got {item!r}")
+        if name in grid:
+            raise ValueError(f"--grid {name} is given twice: list all its values in one --grid {name}=v1,v2,...")
+        grid[name] = values
+    return grid
+
+
+def grid_points(spec: SweepSpec) -> list:
+    """Every (grid values, seed) of the sweep, the first grid parameter varying slowest, seeds fastest."""
+    if int(spec.seeds) < 1:
+        raise ValueError(f"--seeds must be an integer >= 1, got {spec.seeds!r}")
+    names = list(spec.grid)
+    return [Point(tuple(zip(names, values)), seed)
+            for values in itertools.product(*(spec.grid[n] for n in names)) for seed in range(int(spec.seeds))]  # fmt: skip
+
+
+def check_points(spec: SweepSpec, points) -> None:
+    """Every point's parameters resolved before anything runs: a bad name or value is a SceneError
+    naming it, and a grid parameter also set with --set is refused."""
+    module = load_scene(spec.scene)
+    clash = set(spec.grid) & {str(item).partition("=")[0].strip() for item in spec.fixed}
+    if clash:
+        raise SceneError(f"{', '.join(sorted(clash))} is both swept (--grid) and fixed (--set): keep one")
+    unknown = set(spec.grid) - set(fields(module.Parameters))
+    if unknown:
+        raise SceneError(f"unknown parameter {sorted(unknown)[0]!r} in --grid; valid: {', '.join(sorted(fields(module.Parameters)))}")
+    for point in points:
+        resolve(module.Parameters, getattr(module, "QUICK", {}) if spec.quick else None, [*spec.fixed, *point.overrides()])
+
+
+def result_path(out: str, point: Point) -> str:
+    return os.path.join(out, "points", f"{point.name}.json")
+
+
+def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
+    """Run one point to its end and write its result (parameters, outcome, measurements) atomically.
+    A solver failure is a result ("stopped", with the frames before it measured); an error while
+    building the run is a result too ("failed", with the message)."""
+    module = load_scene(spec.scene)
+    p = resolve(module.Parameters, getattr(module, "QUICK", {}) if spec.quick else None, [*spec.fixed, *point.overrides()])
+    result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition()}
+    reports, start = [], time.perf_counter()
+    try:
+        run = module.build(p, device=spec.device, seed=point.seed, report=reports.append)
+    except (ValueError, *FAILURES) as error:
+        result.update(status="failed", error=str(error), wall_time_s=time.perf_counter() - start)
+        write_json(result_path(out, point), result)
+        return result
+    writers = []
+    if spec.h5:
+        writers.append(TrajectoryWriter(os.path.join(out, "points", f"{point.name}.h5"), triangles=run.mesh.triangles,
+                                        rest_positions=run.mesh.vertices, series=run.series, scene=module.NAME,
+                                        parameters=run.resolved, device=str(run.shell.device)))  # fmt: skip
+    outcome = simulate(run, writers, on_measured=writers[0].set_measurements if writers else None)
+    if outcome.interrupted:
+        raise KeyboardInterrupt
+    result.update(status="stopped" if outcome.failure else "done", stopped=outcome.failure, frames=outcome.frames,
+                  steps=run.steps, device=str(run.shell.device), wall_time_s=time.perf_counter() - start,
+                  reports=reports, parameters=run.resolved, measurements=outcome.measurements)  # fmt: skip
+    write_json(result_path(out, point), result)
+    return result
+
+
+def run_batch(spec: SweepSpec, points, out: str) -> list:
+    """The points of one batch, one after another in this worker (each result written as it comes)."""
+    wp.config.log_level = wp.LOG_WARNING
+    return [run_point(spec, point, out) for point in points]
+
+
+def batches(points, size: int) -> list:
+    if int(size) < 1:
+        raise ValueError(f"--batch must be an integer >= 1, got {size!r}")
+    return [points[k:k + int(size)] for k in range(0, len(points), int(size))]
+
+
+def prepare_folder(spec: SweepSpec, out: str) -> None:
+    """DIR/sweep.json holds the sweep's definition; a folder holding another sweep is refused."""
+    os.makedirs(os.path.join(out, "points"), exist_ok=True)
+    stored = os.path.join(out, "sweep.json")
+    if os.path.isfile(stored):
+        with open(stored) as f:
+            before = json.load(f)
+        if before != json.loads(json.dumps(spec.definition())):
+            raise ValueError(f"{out} holds another sweep ({before}): choose another --out, or the same scene, "
+                             "grid, seeds, --set and --quick to continue it")  # fmt: skip
+    else:
+        write_json(stored, spec.definition())
+
+
+def local_cluster(device: str | None = None, workers: int | None = None) -> SpecCluster:
+    """A Dask cluster on this machine: one single-threaded worker per GPU (CUDA_VISIBLE_DEVICES set
+    to it) when CUDA is present and `device` is not "cpu", else `workers` CPU workers (default: one
+    per core). Each worker has its own WARP_CACHE_PATH, seeded from this process's kernel cache, so
+    compiled kernels are reused but no cache is written by two processes."""
+    init_warp()
+    gpus = 0 if device == "cpu" else wp.get_cuda_device_count()
+    count = gpus or int(workers or os.cpu_count() or 1)
+    base = tempfile.mkdtemp(prefix="wavewarp-sweep-cache-")
+    specification = {}
+    for k in range(count):
+        cache = os.path.join(base, f"worker-{k}")
+        if os.path.isdir(wp.config.kernel_cache_dir or ""):  # Warp's cache folder is versioned: CACHE/1.19.0
+            shutil.copytree(wp.config.kernel_cache_dir, os.path.join(cache, os.path.basename(wp.config.kernel_cache_dir)))
+        env = {"WARP_CACHE_PATH": cache, "CUDA_VISIBLE_DEVICES": str(k) if gpus else "", "OMP_NUM_THREADS": "1"}
+        specification[f"worker-{k}"] = {"cls": Nanny, "options": {"nthreads": 1, "env": env, "silence_logs": logging.ERROR}}
+    return SpecCluster(workers=specification, scheduler={"cls": Scheduler, "options": {"dashboard_address": ":0"}},
+                       silence_logs=logging.ERROR)  # fmt: skip
+
+
+@contextlib.contextmanager
+def _executor(executor, spec: SweepSpec, workers, scheduler, report):
+    """The executor given, or a Dask client's (of `scheduler`, or of a local cluster closed at the end)."""
+    if executor is not None:
+        yield executor
+        return
+    with contextlib.ExitStack() as stack:
+        cluster = None if scheduler else stack.enter_context(local_cluster(spec.device, workers))
+        client = stack.enter_context(Client(scheduler or cluster))
+        report(f"Dask: {len(client.scheduler_info()['workers'])} workers; dashboard {client.dashboard_link}")
+        yield client.get_executor()
+
+
+def table_rows(out: str, points) -> list:
+    """One row per point with a result: its grid values, seed, status and numeric measurements."""
+    rows = []
+    for point in points:
+        path = result_path(out, point)
+        if not os.path.isfile(path):
+            continue
+        with open(path) as f:
+            result = json.load(f)
+        row = {"point": point.name, **result["values"], "seed": result["seed"], "status": result["status"],
+               "frames": result.get("frames", 0), "wall_time_s": result["wall_time_s"], "device": result.get("device", "")}  # fmt: skip
+        row.update({k: v for k, v in result.get("measurements", {}).items() if isinstance(v, (int, float))})
+        rows.append(row)
+    return rows
+
+
+def write_table(rows, path) -> None:
+    """The rows as CSV (the union of their columns, in first-seen order), written atomically."""
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | None = None, batch: int = 1,
+          workers: int | None = None, scheduler: str | None = None, progress: bool = False, report=print) -> list:  # fmt: skip
+    """Run every point of `spec` without a result in `out` (batches of `batch` points on `executor`;
+    None: a Dask client of `scheduler`, or of a local cluster), then write DIR/table.csv and
+    DIR/chart.png. Returns the rows of the table (one dict per point)."""
+    points = grid_points(spec)
+    check_points(spec, points)
+    prepare_folder(spec, out)
+    missing = [p for p in points if not os.path.isfile(result_path(out, p))]
+    report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
+    if missing:
+        with _executor(executor, spec, workers, scheduler, report) as pool:
+            futures = [pool.submit(run_batch, spec, group, out) for group in batches(missing, batch)]
+            bar = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress)
+            for future in concurrent.futures.as_completed(futures):
+                bar.update(len(future.result()))
+            bar.close()
+    rows = table_rows(out, points)
+    write_table(rows, os.path.join(out, "table.csv"))
+    sweep_chart_png(rows, list(spec.grid), spec.measure, os.path.join(out, "chart.png"), title=spec.scene)
+    return rows
