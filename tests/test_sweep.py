@@ -4,8 +4,10 @@ Dask cluster killed midway."""
 
 import concurrent.futures
 import csv
+import importlib
 import json
 import os
+import pkgutil
 import signal
 import subprocess
 import sys
@@ -13,11 +15,13 @@ import time
 
 import numpy as np
 import pytest
+import warp as wp
 
-from wavewarp import cli, walker
+from wavewarp import cli, kernels, walker
+from wavewarp.device import set_deterministic
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import SceneError, load_scene, resolve
-from wavewarp.sweep import Point, SweepSpec, grid_points, parse_grid, sweep
+from wavewarp.sweep import Point, SweepSpec, grid_points, merge_kernel_cache, parse_grid, sweep
 
 QUICK_CUBE = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True, device="cpu")
 
@@ -133,3 +137,26 @@ def test_walker_seeds_perturb_the_rest_shape(monkeypatch):
     first, second = (mesh.vertices - sphere.vertices for mesh in built[:2])
     assert 0.5e-3 < np.std(first) / noisy.radius < 2e-3 and not np.allclose(first, second)
     assert np.array_equal(built[2].vertices, sphere.vertices)
+
+
+def test_workers_kernels_are_merged_back_into_the_cache(tmp_path):
+    """Entries the worker compiled are copied into the parent's cache; existing ones are kept as they are."""
+    worker, parent = tmp_path / "worker", tmp_path / "parent"
+    for folder, entries in ((worker, {"wp_a_1": "new", "wp_b_2": "worker's"}), (parent, {"wp_b_2": "parent's"})):
+        for entry, text in entries.items():
+            (folder / entry).mkdir(parents=True)
+            (folder / entry / "module.o").write_text(text)
+    merge_kernel_cache(str(worker), str(parent))
+    assert sorted(os.listdir(parent)) == ["wp_a_1", "wp_b_2"]
+    assert (parent / "wp_a_1" / "module.o").read_text() == "new"
+    assert (parent / "wp_b_2" / "module.o").read_text() == "parent's"
+
+
+def test_deterministic_mode_reaches_every_kernel_module():
+    modules = [importlib.import_module(f"wavewarp.kernels.{m.name}") for m in pkgutil.iter_modules(kernels.__path__)]
+    try:
+        set_deterministic(True)
+        assert all(wp.get_module_options(m)["deterministic"] == wp.DeterministicMode.RUN_TO_RUN for m in modules)
+    finally:
+        set_deterministic(False)
+    assert all(wp.get_module_options(m)["deterministic"] == wp.DeterministicMode.NOT_GUARANTEED for m in modules)

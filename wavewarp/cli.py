@@ -16,7 +16,7 @@ from wavewarp.benchmarks import NAMES as BENCHMARKS
 
 from .version import __version__
 from .driver import simulate
-from .device import resolve_device
+from .device import resolve_device, set_deterministic
 from .geometry import limit_positions
 from .io import check_writable
 from .mesh import cube, icosphere, load, prism
@@ -57,6 +57,7 @@ def _scene_run(args) -> int:
         print("\n".join(help_lines(module.Parameters)))
         return 0
     resolve_device(args.device)  # an unavailable device is refused before anything is built
+    set_deterministic(args.deterministic)
     out = args.out or f"{module.NAME}.usda"
     h5_path = args.h5 or f"{os.path.splitext(out)[0]}_trajectory.h5"
     p = _parameters(module, args, h5_path)
@@ -111,7 +112,7 @@ def _scene_run(args) -> int:
 def _sweep(args) -> int:
     wp.config.log_level = wp.LOG_WARNING
     spec = SweepSpec(args.scene, grid=parse_grid(args.grid), seeds=args.seeds, fixed=tuple(args.set), quick=args.quick,
-                     device=args.device, h5=args.h5, measure=args.measure)  # fmt: skip
+                     device=args.device, h5=args.h5, measure=args.measure, deterministic=args.deterministic)  # fmt: skip
     start = time.perf_counter()
 
     def report(message):
@@ -182,6 +183,11 @@ def _refinements(text: str) -> int:
     return int(text)
 
 
+def _deterministic_argument(command) -> None:
+    command.add_argument("--deterministic", action="store_true",
+                         help="bit-exact repeated runs on a GPU (Warp's deterministic atomics; slower)")  # fmt: skip
+
+
 def _usd_arguments(command) -> None:
     command.add_argument("--usd-surface", default="loop", choices=("loop", "baked"),
                          help="loop: the control mesh with subdivisionScheme loop (viewers that refine Loop draw the "
@@ -214,6 +220,7 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, default=0, help="seed of the scene's random perturbations")
     run.add_argument("--resume", action="store_true", help="continue the run stored in --h5")
     run.add_argument("--json", action="store_true", help="print one JSON object with the results")
+    _deterministic_argument(run)
     run.set_defaults(run=_scene_run)
     grid = commands.add_parser("sweep", help="run a scene over a grid of parameter values and seeds (Dask)")
     grid.add_argument("scene", help="a scene name (wavewarp list) or the path of a scene script")
@@ -230,7 +237,8 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                       help="an existing Dask scheduler (tcp://host:8786) instead of a local cluster")  # fmt: skip
     grid.add_argument("--quick", action="store_true", help="the scene's reduced run at every point")
     grid.add_argument("--h5", action="store_true", help="also keep every point's trajectory (DIR/points/*.h5)")
-    grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first)")
+    grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
+    _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)
     draw = commands.add_parser("render", help="draw a mesh's Loop limit surface to USD, coloured by mean curvature")
     draw.add_argument("--mesh", default="icosphere", help="icosphere, cube, prism or a mesh file (default icosphere)")

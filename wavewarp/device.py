@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import importlib
 import os
+import pkgutil
 import platform
 import sys
 import tempfile
@@ -10,9 +12,13 @@ import tempfile
 import numpy as np
 import warp as wp
 
+from . import kernels
 from .kernels.reduce import REDUCTION_BLOCK, block_sum_kernel
 
 DTYPES = {"float32": wp.float32, "float64": wp.float64}
+# atomic updates one thread may record in deterministic mode, per kernel module: a patch scatters 18
+# values per target; assembling K or M a patch's 18 × 18 pairs, the Newton Hessian's blocks per point
+DETERMINISTIC_RECORDS = {"default": 64, "laplace": 1024, "newton": 4096}
 
 
 NO_CUDA_DRIVER = "Could not find or load the NVIDIA CUDA driver"
@@ -38,6 +44,17 @@ def init_warp() -> None:
     if kept:
         print("\n".join(kept), file=sys.stderr)
     init_warp.done = True
+
+
+def set_deterministic(on: bool) -> None:
+    """Bit-exact repeated runs on a GPU: Warp's run-to-run deterministic atomics for every kernel
+    module of wavewarp and every module created later (a CPU run is deterministic either way)."""
+    mode = wp.DeterministicMode.RUN_TO_RUN if on else wp.DeterministicMode.NOT_GUARANTEED
+    wp.config.deterministic, wp.config.deterministic_max_records = mode, DETERMINISTIC_RECORDS["default"] if on else 0
+    for info in pkgutil.iter_modules(kernels.__path__):
+        records = DETERMINISTIC_RECORDS.get(info.name, DETERMINISTIC_RECORDS["default"]) if on else 0
+        wp.set_module_options({"deterministic": mode, "deterministic_max_records": records},
+                              module=importlib.import_module(f"{kernels.__name__}.{info.name}"))  # fmt: skip
 
 
 def resolve_device(device=None) -> wp.context.Device:

@@ -373,7 +373,7 @@ def locomotion_png(runs, path, title: str = "walkers: displacement against time 
     write_png(locomotion_figure(runs, title), path)
 
 
-SWEEP_COLUMNS = ("point", "seed", "status", "frames", "wall_time_s", "device", "time")
+SWEEP_COLUMNS = ("point", "seed", "status", "frames", "steps", "wall_time_s", "device", "time")
 
 
 def _number(text):

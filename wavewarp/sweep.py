@@ -30,7 +30,7 @@ import warp as wp
 from distributed import Client, Nanny, Scheduler, SpecCluster
 from tqdm import tqdm
 
-from .device import init_warp
+from .device import init_warp, set_deterministic
 from .driver import FAILURES, simulate
 from .figures import sweep_chart_png
 from .io import atomic_path, write_json
@@ -43,7 +43,8 @@ class SweepSpec:
     """What a sweep runs: the scene, `grid` (parameter name -> the values' text, in order), `seeds`
     (0 … seeds-1 at every grid point), `fixed` NAME=VALUE settings for every point, `quick` (the
     scene's reduced run), `device` ("cpu", "cuda" or None: the worker's choice), `h5` (a trajectory
-    per point) and `measure`, the measurement the chart shows (None: the first numeric one)."""
+    per point), `measure`, the measurement the chart shows (None: the first that differs between
+    points), and `deterministic` (bit-exact repeated runs on a GPU: wavewarp.device.set_deterministic)."""
 
     scene: str
     grid: dict = field(default_factory=dict)
@@ -53,11 +54,12 @@ class SweepSpec:
     device: str | None = None
     h5: bool = False
     measure: str | None = None
+    deterministic: bool = False
 
     def definition(self) -> dict:
-        """What identifies the sweep's points and results (not how or where they run)."""
+        """What identifies the sweep's points and results (not where they run)."""
         return {"scene": self.scene, "grid": self.grid, "seeds": self.seeds, "fixed": list(self.fixed),
-                "quick": self.quick}  # fmt: skip
+                "quick": self.quick, "deterministic": self.deterministic}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -150,6 +152,7 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
 def run_batch(spec: SweepSpec, points, out: str) -> list:
     """The points of one batch, one after another in this worker (each result written as it comes)."""
     wp.config.log_level = wp.LOG_WARNING
+    set_deterministic(spec.deterministic)
     return [run_point(spec, point, out) for point in points]
 
 
@@ -173,24 +176,49 @@ def prepare_folder(spec: SweepSpec, out: str) -> None:
         write_json(stored, spec.definition())
 
 
-def local_cluster(device: str | None = None, workers: int | None = None) -> SpecCluster:
-    """A Dask cluster on this machine: one single-threaded worker per GPU (CUDA_VISIBLE_DEVICES set
-    to it) when CUDA is present and `device` is not "cpu", else `workers` CPU workers (default: one
-    per core). Each worker has its own WARP_CACHE_PATH, seeded from this process's kernel cache, so
-    compiled kernels are reused but no cache is written by two processes."""
+@contextlib.contextmanager
+def local_cluster(device: str | None = None, workers: int | None = None):
+    """A Dask cluster on this machine: one single-threaded worker per GPU this process sees
+    (CUDA_VISIBLE_DEVICES of the worker set to it) when CUDA is present and `device` is not "cpu",
+    else `workers` CPU workers (default: one per core). Each worker has its own WARP_CACHE_PATH,
+    seeded from this process's kernel cache, so that no cache is written by two processes; the
+    kernels the workers compiled are copied back into it at the end, so the next sweep starts warm."""
     init_warp()
     gpus = 0 if device == "cpu" else wp.get_cuda_device_count()
+    visible = [v for v in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",") if v.strip()] or [str(k) for k in range(gpus)]
     count = gpus or int(workers or os.cpu_count() or 1)
+    ours = wp.config.kernel_cache_dir  # versioned: CACHE/1.19.0
     base = tempfile.mkdtemp(prefix="wavewarp-sweep-cache-")
+    caches = [os.path.join(base, f"worker-{k}") for k in range(count)]
     specification = {}
-    for k in range(count):
-        cache = os.path.join(base, f"worker-{k}")
-        if os.path.isdir(wp.config.kernel_cache_dir or ""):  # Warp's cache folder is versioned: CACHE/1.19.0
-            shutil.copytree(wp.config.kernel_cache_dir, os.path.join(cache, os.path.basename(wp.config.kernel_cache_dir)))
-        env = {"WARP_CACHE_PATH": cache, "CUDA_VISIBLE_DEVICES": str(k) if gpus else "", "OMP_NUM_THREADS": "1"}
+    for k, cache in enumerate(caches):
+        shutil.copytree(ours, os.path.join(cache, os.path.basename(ours)))
+        env = {"WARP_CACHE_PATH": cache, "CUDA_VISIBLE_DEVICES": visible[k] if gpus else "", "OMP_NUM_THREADS": "1"}
         specification[f"worker-{k}"] = {"cls": Nanny, "options": {"nthreads": 1, "env": env, "silence_logs": logging.ERROR}}
-    return SpecCluster(workers=specification, scheduler={"cls": Scheduler, "options": {"dashboard_address": ":0"}},
-                       silence_logs=logging.ERROR)  # fmt: skip
+    try:
+        with SpecCluster(workers=specification, scheduler={"cls": Scheduler, "options": {"dashboard_address": ":0"}},
+                         silence_logs=logging.ERROR) as cluster:  # fmt: skip
+            yield cluster
+    finally:
+        for cache in caches:
+            merge_kernel_cache(os.path.join(cache, os.path.basename(ours)), ours)
+        shutil.rmtree(base, ignore_errors=True)
+
+
+def merge_kernel_cache(source: str, target: str) -> None:
+    """Copy the compiled modules of `source` that `target` lacks (each entry to a temporary name,
+    then renamed: another process reading `target` never sees half an entry)."""
+    if not os.path.isdir(source):
+        return
+    for entry in os.listdir(source):
+        made, staging = os.path.join(source, entry), os.path.join(target, f".{entry}.{os.getpid()}.tmp")
+        if os.path.exists(os.path.join(target, entry)) or not os.path.isdir(made):
+            continue
+        try:
+            shutil.copytree(made, staging)
+            os.replace(staging, os.path.join(target, entry))
+        except OSError:  # another process put it there first
+            shutil.rmtree(staging, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -216,7 +244,7 @@ def table_rows(out: str, points) -> list:
         with open(path) as f:
             result = json.load(f)
         row = {"point": point.name, **result["values"], "seed": result["seed"], "status": result["status"],
-               "frames": result.get("frames", 0), "wall_time_s": result["wall_time_s"], "device": result.get("device", "")}  # fmt: skip
+               "frames": result.get("frames", 0), "steps": result.get("steps", 0), "wall_time_s": result["wall_time_s"], "device": result.get("device", "")}  # fmt: skip
         row.update({k: v for k, v in result.get("measurements", {}).items() if isinstance(v, (int, float))})
         rows.append(row)
     return rows

@@ -1,0 +1,111 @@
+"""Sweep scaling benchmark (docs/theory/sweeps.md): one sweep on 1, 2, 4, ... GPUs (or CPU workers).
+
+    wavewarp bench sweep_scaling --device cuda --workers 1,2 --out benchmarks/results [--deterministic]
+    wavewarp bench sweep_scaling --quick --device cpu --workers 1,2 --out DIR     # a CPU smoke run
+
+Runs the same sweep (default: the sphere walker at level 3 over 2 periods, AC ∈ {0, 0.1, 0.2, 0.3}
+× sensitive/insensitive × 2 seeds with noise 1e-3; `--quick`: cube-waves, 4 quick points) with the
+embedded Dask cluster on the first N GPUs (CUDA_VISIBLE_DEVICES) or N CPU workers, for every N
+of `--workers`, each in a fresh process and folder, after one warm-up sweep that fills the kernel
+cache. Writes sweep_scaling_DEVICE.json: per N the wall time, the aggregate mechanics (or wave)
+steps per second, the parallel efficiency against the smallest N, and how many table values
+differ from the smallest N's (0 expected with --deterministic; on a GPU float atomics otherwise
+reorder sums from run to run); and sweep_scaling_DEVICE.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import date
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+
+from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
+from wavewarp.io import write_json, write_png  # noqa: E402
+
+SWEEP = ["sphere-walker", "--grid", "AC=0,0.1,0.2,0.3", "--grid", "sensitive=true,false", "--seeds", "2",
+         "--set", "noise=1e-3", "--set", "level=3", "--set", "periods=2"]  # fmt: skip
+QUICK = ["cube-waves", "--quick", "--grid", "gamma=0.8,0.9,1.0,1.1"]
+TIMING = ("wall_time_s", "device")  # columns that may differ between equal runs
+
+
+def run_sweep(arguments, out: str, workers: int, device: str) -> float:
+    """One sweep in a fresh process on `workers` GPUs (the first ones) or CPU workers; its wall time."""
+    env = dict(os.environ)
+    command = [sys.executable, "-m", "wavewarp.cli", "sweep", *arguments, "--device", device, "--out", out]
+    if device == "cuda":
+        env["CUDA_VISIBLE_DEVICES"] = ",".join(str(k) for k in range(workers))
+    else:
+        command += ["--workers", str(workers)]
+    start = time.perf_counter()
+    subprocess.run(command, env=env, check=True, capture_output=True, text=True)
+    return time.perf_counter() - start
+
+
+def table(out: str) -> dict:
+    with open(os.path.join(out, "table.csv")) as f:
+        return {row["point"]: row for row in csv.DictReader(f)}
+
+
+def steps(rows: dict) -> float:
+    """The sweep's work: the walkers' mechanics steps, else the waves' steps, summed over points."""
+    column = "mechanics_steps" if all(r.get("mechanics_steps") for r in rows.values()) else "steps"
+    return sum(float(r[column]) for r in rows.values())
+
+
+def differing(rows: dict, reference: dict) -> int:
+    return sum(rows[p][k] != reference[p][k] for p in reference for k in reference[p] if k not in TIMING)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="wavewarp bench sweep_scaling", description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cuda", choices=("cpu", "cuda"))
+    parser.add_argument("--workers", default="1,2", help="numbers of GPUs (or CPU workers), comma-separated")
+    parser.add_argument("--quick", action="store_true", help="4 quick cube-waves points (a CPU smoke run)")
+    parser.add_argument("--deterministic", action="store_true", help="Warp's deterministic atomics in every run")
+    parser.add_argument("--out", default="benchmarks/results")
+    args = parser.parse_args(argv)
+    counts = sorted({int(n) for n in args.workers.split(",")})
+    device = resolve_device("cuda:0" if args.device == "cuda" else "cpu")
+    arguments = (QUICK if args.quick else SWEEP) + (["--deterministic"] if args.deterministic else [])
+    os.makedirs(args.out, exist_ok=True)
+    rows, reference = [], None
+    with tempfile.TemporaryDirectory(prefix="wavewarp-sweep-scaling-") as scratch:
+        warm = run_sweep(arguments, os.path.join(scratch, "warm-up"), counts[0], args.device)
+        for n in counts:
+            wall = run_sweep(arguments, os.path.join(scratch, f"workers-{n}"), n, args.device)
+            results = table(os.path.join(scratch, f"workers-{n}"))
+            reference = reference or results
+            rows.append({"workers": n, "wall_s": wall, "points": len(results), "steps_per_s": steps(results) / wall,
+                         "differing_values": differing(results, reference)})  # fmt: skip
+    for row in rows:
+        row["efficiency"] = rows[0]["wall_s"] * rows[0]["workers"] / (row["wall_s"] * row["workers"])
+        print(f"{row['workers']:3d} {args.device} workers: {row['wall_s']:7.1f} s, {row['steps_per_s']:10.4g} steps/s, "
+              f"efficiency {row['efficiency']:.2f}, {row['differing_values']} table values differ from {counts[0]}")  # fmt: skip
+    result = {"benchmark": "sweep_scaling", **describe_device(device), "date": date.today().isoformat(),
+              "sweep": arguments, "warm_up_s": warm, "rows": rows}  # fmt: skip
+    write_json(os.path.join(args.out, f"sweep_scaling_{device_tag(device)}.json"), result)
+    fig, ax = plt.subplots(figsize=(5.2, 3.8))
+    ax.plot([r["workers"] for r in rows], [r["steps_per_s"] for r in rows], "o-", label="measured")
+    ax.plot(counts, [rows[0]["steps_per_s"] * n / counts[0] for n in counts], "k--", lw=1, label="ideal")
+    ax.set_xlabel(f"{'GPUs' if args.device == 'cuda' else 'CPU workers'} (one Dask worker each)")
+    ax.set_ylabel("aggregate steps per second")
+    ax.set_title(f"sweep scaling, {device.name}", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    write_png(fig, os.path.join(args.out, f"sweep_scaling_{device_tag(device)}.png"))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
