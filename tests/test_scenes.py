@@ -65,7 +65,8 @@ def test_quick_run_writes_usd_and_hdf5(scene, device, tmp_path, capsys):
 
 def test_resuming_from_hdf5_gives_the_uninterrupted_trajectory(tmp_path, capsys):
     full, part = tmp_path / "full.h5", tmp_path / "part.h5"
-    args = ["starfish", "--quick", "--device", "cpu", "--set", "frames=4", "--set", "t_end=8", "--set", "dtype=float64"]
+    args = ["starfish", "--quick", "--device", "cpu", "--set", "frames=4", "--set", "t_end=4", "--set", "dtype=float64",
+            "--set", "level=2"]  # fmt: skip
     assert run_cli(capsys, *args, "--out", str(tmp_path / "full.usda"), "--h5", str(full))[0] == 0
     # as if Ctrl-C had stopped it after two frames, and the file came from before newton_steps existed
     assert_resumed_run_equals(capsys, "starfish", full, part, keep=2, older=("newton_steps",))
