@@ -65,7 +65,7 @@ def test_the_smooth_frame_draws_points_of_the_limit_surface_and_its_field(rng):
     surface = SmoothSurface(mesh, levels=1)
     fig, _, points = frame_figure(run, surface)
     _, values = surface(x, c)
-    children = surface.mesh.triangles.reshape(-1, 4, 3)[:, 0]  # child 4t: (corner 1, edge 1-2, edge 3-1) of t
+    children = surface.triangles.reshape(-1, 4, 3)[:, 0]  # child 4t: (corner 1, edge 1-2, edge 3-1) of t
     triangles = np.arange(mesh.n_triangles)
     as_points = np.column_stack([c, np.zeros((len(c), 2))])  # the field as the x coordinate of a surface
     for column, vw in ((0, (0.0, 0.0)), (1, (0.5, 0.0)), (2, (0.0, 0.5))):
@@ -74,7 +74,7 @@ def test_the_smooth_frame_draws_points_of_the_limit_surface_and_its_field(rng):
         np.testing.assert_allclose(points[children[:, column]], exact, atol=1e-12)
         field = sample_points(mesh, triangles, parameters, as_points)[:, 0]
         np.testing.assert_allclose(values[children[:, column]], field, atol=1e-12)
-    assert len(surface.mesh.vertices) == mesh.n_vertices + len(mesh.edges)
+    assert surface.n_vertices == mesh.n_vertices + len(mesh.edges)
 
 
 def kymograph_run(curvature, R=10.0):

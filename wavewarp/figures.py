@@ -25,11 +25,10 @@ from matplotlib.colors import Normalize  # noqa: E402
 
 from .boxes import face_grid, opposite_face, unfolded_net  # noqa: E402
 from .colours import COLOUR_MAP, PERCENTILES, colour_map, run_range  # noqa: E402
-from .geometry import limit_positions  # noqa: E402
 from .io import write_png  # noqa: E402
 from .measurements import measured_period, upward_crossings  # noqa: E402
 from .mesh import Mesh  # noqa: E402
-from .subdivision import loop_subdivide  # noqa: E402
+from .refinement import BakedSurface  # noqa: E402
 from .unfolding import first_arrival  # noqa: E402
 
 SMOOTH_TRIANGLES = 16000  # the rendered frame refines the control mesh (once or twice) to about this many
@@ -90,30 +89,17 @@ def _extend(values, low: float, high: float) -> str:
 # The rendered frame
 
 
-class SmoothSurface:
-    """The control mesh refined `levels` times by Loop subdivision, built once per run: a frame's
-    control positions and values give the limit points and the limit field at the refined vertices
-    (points of the same limit surface, since subdivision keeps it)."""
+class SmoothSurface(BakedSurface):
+    """The rendered frame's surface: the control mesh refined once or twice (about SMOOTH_TRIANGLES
+    triangles), built once per run; a frame's control positions and values give the limit points
+    and the limit field at the refined vertices (`BakedSurface`, as the baked USD file)."""
 
     def __init__(self, mesh: Mesh, levels: int | None = None):
-        if levels is None:  # once or twice: about SMOOTH_TRIANGLES triangles
-            levels = 1 if mesh.n_triangles * 4 >= SMOOTH_TRIANGLES else 2
-        self.steps = []  # the triangles each Loop step subdivides
-        vertices, triangles = mesh.vertices, mesh.triangles
-        for _ in range(levels):
-            self.steps.append(triangles)
-            vertices, triangles = loop_subdivide(vertices, triangles)
-        self.mesh = Mesh(vertices, triangles)
-        self.mask = self.mesh.limit_mask_matrix()
+        super().__init__(mesh.triangles, levels or (1 if mesh.n_triangles * 4 >= SMOOTH_TRIANGLES else 2))
 
     def __call__(self, x, c) -> tuple:
         """(points (V', 3), values (V',)): the limit surface and limit field at the refined vertices."""
-        data = np.column_stack([np.asarray(x, dtype=np.float64), np.asarray(c, dtype=np.float64)])
-        for triangles in self.steps:
-            data, _ = loop_subdivide(data, triangles)
-        rows, cols, vals = self.mask
-        values = np.bincount(rows, vals * data[cols, 3], minlength=self.mesh.n_vertices)
-        return limit_positions(self.mesh, data[:, :3], device="cpu", dtype="float64"), values
+        return self.values(x), self.values(c)
 
 
 def _camera(elevation: float, azimuth: float) -> np.ndarray:
@@ -138,7 +124,7 @@ def frame_figure(run, surface: SmoothSurface | None = None) -> tuple:
     surface = surface or SmoothSurface(run.mesh)
     points, field = surface(x, c)
     low, high = run_range(run.concentrations)
-    triangles = surface.mesh.triangles
+    triangles = surface.triangles
     corners = points[triangles]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     if np.einsum("ij,ij->", corners[:, 0], normals) < 0:  # oriented inwards: face the normals out

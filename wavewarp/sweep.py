@@ -113,7 +113,12 @@ def check_points(spec: SweepSpec, points) -> None:
     if unknown:
         raise SceneError(f"unknown parameter {sorted(unknown)[0]!r} in --grid; valid: {', '.join(sorted(fields(module.Parameters)))}")
     for point in points:
-        resolve(module.Parameters, getattr(module, "QUICK", {}) if spec.quick else None, [*spec.fixed, *point.overrides()])
+        point_parameters(module, spec, point)
+
+
+def point_parameters(module, spec: SweepSpec, point: Point):
+    """The scene's parameters at `point`: its defaults (or QUICK), the --set values, the grid values."""
+    return resolve(module.Parameters, getattr(module, "QUICK", {}) if spec.quick else None, [*spec.fixed, *point.overrides()])
 
 
 def result_path(out: str, point: Point) -> str:
@@ -125,7 +130,7 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
     A solver failure is a result ("stopped", with the frames before it measured); an error while
     building the run is a result too ("failed", with the message)."""
     module = load_scene(spec.scene)
-    p = resolve(module.Parameters, getattr(module, "QUICK", {}) if spec.quick else None, [*spec.fixed, *point.overrides()])
+    p = point_parameters(module, spec, point)
     result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition()}
     reports, start = [], time.perf_counter()
     try:
