@@ -7,10 +7,12 @@ Runs the same sweep (default: the sphere walker at level 3 over 2 periods, AC �
 × sensitive/insensitive × 2 seeds with noise 1e-3; `--quick`: cube-waves, 4 quick points) with the
 embedded Dask cluster on the first N GPUs (CUDA_VISIBLE_DEVICES) or N CPU workers, for every N
 of `--workers`, each in a fresh process and folder, after one warm-up sweep that fills the kernel
-cache. Writes sweep_scaling_DEVICE.json: per N the wall time, the aggregate mechanics (or wave)
-steps per second, the parallel efficiency against the smallest N, and how many table values
+cache. Writes sweep_scaling_DEVICE[_deterministic].json: per N the wall time, the aggregate mechanics (or wave)
+steps per second, the parallel efficiency against the smallest N, the points' own wall times
+(summed, and the longest: what the workers could not share), and how many table values
 differ from the smallest N's (0 expected with --deterministic; on a GPU float atomics otherwise
-reorder sums from run to run); and sweep_scaling_DEVICE.png.
+reorder sums from run to run: the warm-up sweep, the same sweep run again on the smallest N, gives
+that run-to-run baseline); and the chart, sweep_scaling_DEVICE[_deterministic].png.
 """
 
 from __future__ import annotations
@@ -72,39 +74,56 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default="cuda", choices=("cpu", "cuda"))
     parser.add_argument("--workers", default="1,2", help="numbers of GPUs (or CPU workers), comma-separated")
     parser.add_argument("--quick", action="store_true", help="4 quick cube-waves points (a CPU smoke run)")
-    parser.add_argument("--deterministic", action="store_true", help="Warp's deterministic atomics in every run")
+    parser.add_argument("--deterministic", action="store_true",
+                        help="bit-exact runs (wavewarp.device.set_deterministic) in every sweep")
     parser.add_argument("--out", default="benchmarks/results")
     args = parser.parse_args(argv)
     counts = sorted({int(n) for n in args.workers.split(",")})
     device = resolve_device("cuda:0" if args.device == "cuda" else "cpu")
     arguments = (QUICK if args.quick else SWEEP) + (["--deterministic"] if args.deterministic else [])
     os.makedirs(args.out, exist_ok=True)
+    name = f"sweep_scaling_{device_tag(device)}{'_deterministic' if args.deterministic else ''}"
     rows, reference = [], None
     with tempfile.TemporaryDirectory(prefix="wavewarp-sweep-scaling-") as scratch:
-        warm = run_sweep(arguments, os.path.join(scratch, "warm-up"), counts[0], args.device)
+        result = {"benchmark": "sweep_scaling", **describe_device(device), "date": date.today().isoformat(),
+                  "sweep": arguments, "warm_up_s": run_sweep(arguments, os.path.join(scratch, "warm-up"), counts[0],
+                                                             args.device), "rows": rows}  # fmt: skip
         for n in counts:
             wall = run_sweep(arguments, os.path.join(scratch, f"workers-{n}"), n, args.device)
             results = table(os.path.join(scratch, f"workers-{n}"))
             reference = reference or results
-            rows.append({"workers": n, "wall_s": wall, "points": len(results), "steps_per_s": steps(results) / wall,
-                         "differing_values": differing(results, reference)})  # fmt: skip
-    for row in rows:
-        row["efficiency"] = rows[0]["wall_s"] * rows[0]["workers"] / (row["wall_s"] * row["workers"])
-        print(f"{row['workers']:3d} {args.device} workers: {row['wall_s']:7.1f} s, {row['steps_per_s']:10.4g} steps/s, "
-              f"efficiency {row['efficiency']:.2f}, {row['differing_values']} table values differ from {counts[0]}")  # fmt: skip
-    result = {"benchmark": "sweep_scaling", **describe_device(device), "date": date.today().isoformat(),
-              "sweep": arguments, "warm_up_s": warm, "rows": rows}  # fmt: skip
-    write_json(os.path.join(args.out, f"sweep_scaling_{device_tag(device)}.json"), result)
+            if n == counts[0]:  # the warm-up ran the same sweep on as many workers: the run-to-run baseline
+                result["warm_up_differing_values"] = differing(table(os.path.join(scratch, "warm-up")), reference)
+                print(f"the warm-up sweep on {n} workers (the same sweep, run again) differs from it in "
+                      f"{result['warm_up_differing_values']} values")  # fmt: skip
+            point_walls = [float(r["wall_time_s"]) for r in results.values()]
+            row = {"workers": n, "wall_s": wall, "points": len(results), "steps_per_s": steps(results) / wall,
+                   "points_wall_sum_s": sum(point_walls), "longest_point_s": max(point_walls),
+                   "differing_values": differing(results, reference)}  # fmt: skip
+            row["efficiency"] = rows[0]["wall_s"] * rows[0]["workers"] / (wall * n) if rows else 1.0
+            rows.append(row)
+            print(f"{n:3d} {args.device} workers: {wall:7.1f} s, {row['steps_per_s']:10.4g} steps/s, efficiency "
+                  f"{row['efficiency']:.2f}, points {row['points_wall_sum_s']:.1f} s in all (longest "
+                  f"{row['longest_point_s']:.1f} s), {row['differing_values']} table values differ from {counts[0]}",
+                  flush=True)  # fmt: skip
+            write_results(result, args, device, os.path.join(args.out, name))  # each worker count as it ends
+    return 0
+
+
+def write_results(result: dict, args, device, stem: str) -> None:
+    """STEM.json and the chart STEM.png of the worker counts measured so far."""
+    write_json(f"{stem}.json", result)
+    rows = result["rows"]
+    counts = [r["workers"] for r in rows]
     fig, ax = plt.subplots(figsize=(5.2, 3.8))
-    ax.plot([r["workers"] for r in rows], [r["steps_per_s"] for r in rows], "o-", label="measured")
+    ax.plot(counts, [r["steps_per_s"] for r in rows], "o-", label="measured")
     ax.plot(counts, [rows[0]["steps_per_s"] * n / counts[0] for n in counts], "k--", lw=1, label="ideal")
     ax.set_xlabel(f"{'GPUs' if args.device == 'cuda' else 'CPU workers'} (one Dask worker each)")
     ax.set_ylabel("aggregate steps per second")
-    ax.set_title(f"sweep scaling, {device.name}", fontsize=9)
+    ax.set_title(f"sweep scaling{', deterministic' if args.deterministic else ''}, {device.name}", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    write_png(fig, os.path.join(args.out, f"sweep_scaling_{device_tag(device)}.png"))
-    return 0
+    write_png(fig, f"{stem}.png")
 
 
 if __name__ == "__main__":

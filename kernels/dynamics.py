@@ -12,27 +12,33 @@ from .reduce import REDUCTION_BLOCK, block_add
 @wp.kernel
 def rigid_sums_kernel(
     forces: wp.array(dtype=Any), mass: wp.array(dtype=Any), x: wp.array(dtype=Any), v: wp.array(dtype=Any),
-    with_momentum: int, sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any),
+    with_momentum: int, threads: int, sums: wp.array(dtype=Any), second_moment: wp.array(dtype=Any),
 ):  # fmt: skip
     """sums += [Σ F, Σ x × F, Σ M x, Σ M v, Σ M x × v] (the last two with_momentum); second_moment += Σ M x xᵀ.
-    Launched on whole blocks; `rigid_correction_kernel` consumes the sums and zeroes them."""
-    i = wp.tid()
+    Launched on whole blocks, `threads` in all, thread t taking vertices t, t + threads, ...;
+    `rigid_correction_kernel` consumes the sums and zeroes them."""
     f = type(forces[0])()
-    r = type(x[0])()
-    p = type(v[0])()
-    m = type(mass[0])(0.0)
-    if i < x.shape[0]:
-        f = forces[i]
-        r = x[i]
+    torque = f
+    mr = f
+    p = f
+    angular = f
+    second = wp.outer(f, f)
+    for i in range(wp.tid(), x.shape[0], threads):
         m = mass[i]
-        p = m * v[i]
+        r = x[i]
+        f += forces[i]
+        torque += wp.cross(r, forces[i])
+        mr += m * r
+        second += m * wp.outer(r, r)
+        p += m * v[i]
+        angular += wp.cross(r, m * v[i])
     block_add(sums, 0, f)
-    block_add(sums, 1, wp.cross(r, f))
-    block_add(sums, 2, m * r)
-    block_add(second_moment, 0, m * wp.outer(r, r))
+    block_add(sums, 1, torque)
+    block_add(sums, 2, mr)
+    block_add(second_moment, 0, second)
     if with_momentum != 0:  # uniform over the launch: every thread of a block calls block_add
         block_add(sums, 3, p)
-        block_add(sums, 4, wp.cross(r, p))
+        block_add(sums, 4, angular)
 
 
 @wp.kernel
@@ -120,12 +126,11 @@ def reference_ramp_kernel(start: wp.array(dtype=Any), end: wp.array(dtype=Any), 
 
 
 @wp.kernel
-def first_moment_kernel(mass: wp.array(dtype=Any), x: wp.array(dtype=Any), moment: wp.array(dtype=Any)):
-    """moment[0] += Σ M_I x_I (zeroed by the caller; launched on whole blocks)."""
-    i = wp.tid()
+def first_moment_kernel(mass: wp.array(dtype=Any), x: wp.array(dtype=Any), threads: int, moment: wp.array(dtype=Any)):
+    """moment[0] += Σ M_I x_I (zeroed by the caller; launched on whole blocks, as rigid_sums_kernel)."""
     r = type(x[0])()
-    if i < x.shape[0]:
-        r = mass[i] * x[i]
+    for i in range(wp.tid(), x.shape[0], threads):
+        r += mass[i] * x[i]
     block_add(moment, 0, r)
 
 
@@ -178,7 +183,7 @@ def eval_rigid_correction(forces: wp.array, mass: wp.array, x: wp.array, v: wp.a
     """rigid: the rigid-body acceleration that removes the net force and torque of `forces` (their
     round-off), and with_momentum the rigid velocity of the same momentum and angular momentum."""
     device = x.device
-    wp.launch(rigid_sums_kernel, dim=threads, inputs=[forces, mass, x, v, int(with_momentum)],
+    wp.launch(rigid_sums_kernel, dim=threads, inputs=[forces, mass, x, v, int(with_momentum), threads],
               outputs=[sums, second_moment], block_dim=REDUCTION_BLOCK, device=device)  # fmt: skip
     wp.launch(rigid_correction_kernel, dim=1, inputs=[sums, second_moment, scalar_of(mass)(inverse_total_mass)],
               outputs=[rigid], device=device)  # fmt: skip
@@ -207,7 +212,7 @@ def eval_reference_ramp(start: wp.array, end: wp.array, fraction: float, out: wp
 def eval_trace_row(mass, x, c, origin: int, threads: int, inverse_total_mass: float, moment, row, trace) -> None:
     """trace[row] = [c_origin, centre of mass, x_origin], row += 1 (device only)."""
     moment.zero_()
-    wp.launch(first_moment_kernel, dim=threads, inputs=[mass, x], outputs=[moment], block_dim=REDUCTION_BLOCK,
+    wp.launch(first_moment_kernel, dim=threads, inputs=[mass, x, threads], outputs=[moment], block_dim=REDUCTION_BLOCK,
               device=x.device)  # fmt: skip
     wp.launch(trace_row_kernel, dim=1, inputs=[c, x, int(origin), moment, scalar_of(mass)(inverse_total_mass)],
               outputs=[row, trace], device=x.device)  # fmt: skip

@@ -11,6 +11,11 @@ than the mesh, where the tangents turn parallel and D would grow as 1/j (docs/th
 `surface_metric_kernel` computes D and M whenever the positions change; `stiffness_kernel`
 then only gathers c,β over the patch and scatters N_I,α D^{αβ} c,β with atomics.
 
+Deterministic (a fixed summation order, bitwise-reproducible on a GPU): each point writes its
+factors (s₀, s₁, s₂) — dω for M, c dω for the consistent mass, D^{αβ} c,β for K — and
+`gather_point_factors_kernel` sums out_I = Σ N_I s₀ + N_I,1 s₁ + N_I,2 s₂ over vertex I's
+patch entries in table order, one thread per vertex, no atomics.
+
 Assembled (`assembled=True`): the same K_IJ, J ≠ I, summed once per surface into CSR rows
 (`assemble_stiffness_kernel`, binary search for the slot), then applied by one gather-only
 thread per vertex, `(K c)_I = Σ_J K_IJ (c_J - c_I)`: no atomics, K·1 = 0 exactly.
@@ -31,7 +36,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .limit_surface import basis_row, patch_scalar
+from .limit_surface import basis_row, entry_point, patch_scalar
 
 
 @wp.func
@@ -57,6 +62,27 @@ def patch_tangents(
     return a1, a2
 
 
+@wp.func
+def surface_metric(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    w: Any,
+    j_floor: Any,
+    t: int,
+    row: int,
+):
+    """D = adj(a) w / max(j, j_floor) and dω = j w at a point of triangle t (basis row `row`)."""
+    a1, a2 = patch_tangents(x, patch_start, patch_vertices, basis, t, row)
+    a11 = wp.dot(a1, a1)
+    a12 = wp.dot(a1, a2)
+    a22 = wp.dot(a2, a2)
+    j = wp.length(wp.cross(a1, a2))
+    s = w / wp.max(j, j_floor)
+    return wp.matrix(a22 * s, -a12 * s, -a12 * s, a11 * s, shape=(2, 2)), j * w
+
+
 @wp.kernel
 def surface_metric_kernel(
     x: wp.array(dtype=Any),
@@ -71,22 +97,39 @@ def surface_metric_kernel(
     area: wp.array(dtype=Any),
     mass: wp.array(dtype=Any),
 ):
-    """D = adj(a) w / max(j, j_floor) and dω = j w at q; M_I += N_I dω (mass zeroed by the caller)."""
+    """D and dω at q (`surface_metric`); M_I += N_I dω (mass zeroed by the caller)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    a1, a2 = patch_tangents(x, patch_start, patch_vertices, basis, t, row)
-    a11 = wp.dot(a1, a1)
-    a12 = wp.dot(a1, a2)
-    a22 = wp.dot(a2, a2)
-    j = wp.length(wp.cross(a1, a2))
-    w = weights[q % points_per_triangle]
-    s = w / wp.max(j, j_floor[q])
-    flux_metric[q] = wp.matrix(a22 * s, -a12 * s, -a12 * s, a11 * s, shape=(2, 2))
-    dw = j * w
+    D, dw = surface_metric(x, patch_start, patch_vertices, basis, weights[q % points_per_triangle], j_floor[q], t, row)
+    flux_metric[q] = D
     area[q] = dw
     start = patch_start[t]
     for k in range(patch_start[t + 1] - start):
         wp.atomic_add(mass, patch_vertices[start + k], basis[row, k][0] * dw)
+
+
+@wp.kernel
+def surface_metric_factors_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    j_floor: wp.array(dtype=Any),
+    flux_metric: wp.array(dtype=Any),
+    area: wp.array(dtype=Any),
+    factors: wp.array(dtype=Any),
+):
+    """D and dω at q, and factors_q = (dω, 0, 0): the lumped mass's, for the gather (no atomics)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    D, dw = surface_metric(x, patch_start, patch_vertices, basis, weights[q % points_per_triangle], j_floor[q], t, row)
+    flux_metric[q] = D
+    area[q] = dw
+    zero = type(dw)(0.0)
+    factors[q] = type(factors[q])(dw, zero, zero)
 
 
 @wp.kernel
@@ -168,6 +211,77 @@ def stiffness_diagonal_kernel(
                 bl = basis[row, l]
                 value = bk[1] * (D[0, 0] * bl[1] + D[0, 1] * bl[2]) + bk[2] * (D[1, 0] * bl[1] + D[1, 1] * bl[2])
                 wp.atomic_add(diagonal, i, value)
+
+
+@wp.kernel
+def mass_factors_kernel(
+    c: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    area: wp.array(dtype=Any),
+    factors: wp.array(dtype=Any),
+):
+    """factors_q = (c_q dω, 0, 0): the consistent mass action's, for the gather."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    value = patch_scalar(c, patch_start, patch_vertices, basis, t, row) * area[q]
+    zero = type(value)(0.0)
+    factors[q] = type(factors[q])(value, zero, zero)
+
+
+@wp.kernel
+def flux_factors_kernel(
+    c: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    flux_metric: wp.array(dtype=Any),
+    factors: wp.array(dtype=Any),
+):
+    """factors_q = (0, D^{1β} c,β, D^{2β} c,β): the stiffness action's, for the gather (c,β as stiffness_kernel)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    start = patch_start[t]
+    c0 = c[patch_vertices[start]]
+    g1 = c0 - c0
+    g2 = g1
+    for k in range(1, patch_start[t + 1] - start):
+        d = c[patch_vertices[start + k]] - c0
+        b = basis[row, k]
+        g1 += b[1] * d
+        g2 += b[2] * d
+    D = flux_metric[q]
+    factors[q] = type(factors[q])(type(g1)(0.0), D[0, 0] * g1 + D[0, 1] * g2, D[1, 0] * g1 + D[1, 1] * g2)
+
+
+@wp.kernel
+def gather_point_factors_kernel(
+    factors: wp.array(dtype=Any),
+    vertex_entry_start: wp.array(dtype=wp.int32),
+    vertex_entries: wp.array(dtype=wp.int32),
+    entry_triangle: wp.array(dtype=wp.int32),
+    patch_start: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    out: wp.array(dtype=Any),
+):
+    """out_I = Σ N_I s₀ + N_I,1 s₁ + N_I,2 s₂ over the points of every patch holding I, in table
+    order (overwritten; no atomics, bitwise-reproducible)."""
+    i = wp.tid()
+    total = type(out[i])(0.0)
+    for e in range(vertex_entry_start[i], vertex_entry_start[i + 1]):
+        for point in range(points_per_triangle):
+            q, b = entry_point(vertex_entries[e], point, entry_triangle, patch_start, triangle_type, basis,
+                               points_per_triangle)  # fmt: skip
+            s = factors[q]
+            total += b[0] * s[0] + b[1] * s[1] + b[2] * s[2]
+    out[i] = total
 
 
 @wp.kernel
@@ -402,9 +516,14 @@ def assembled_diagonal_kernel(row_start: wp.array(dtype=wp.int32), values: wp.ar
 _PATCH = dict(basis="vec6[,]")
 declare_overloads(surface_metric_kernel, x="vec3[]", weights="scalar[]", j_floor="scalar[]", flux_metric="mat22[]",
                   area="scalar[]", mass="scalar[]", **_PATCH)  # fmt: skip
+declare_overloads(surface_metric_factors_kernel, x="vec3[]", weights="scalar[]", j_floor="scalar[]",
+                  flux_metric="mat22[]", area="scalar[]", factors="vec3[]", **_PATCH)  # fmt: skip
 declare_overloads(consistent_mass_kernel, c="scalar[]", area="scalar[]", out="scalar[]", **_PATCH)
 declare_overloads(stiffness_kernel, c="scalar[]", flux_metric="mat22[]", out="scalar[]", **_PATCH)
 declare_overloads(stiffness_diagonal_kernel, flux_metric="mat22[]", diagonal="scalar[]", **_PATCH)
+declare_overloads(mass_factors_kernel, c="scalar[]", area="scalar[]", factors="vec3[]", **_PATCH)
+declare_overloads(flux_factors_kernel, c="scalar[]", flux_metric="mat22[]", factors="vec3[]", **_PATCH)
+declare_overloads(gather_point_factors_kernel, factors="vec3[]", out="scalar[]", **_PATCH)
 declare_overloads(p1_geometry_kernel, p="vec3[]", cot_weight="vec3[]", area="scalar[]", mass="scalar[]")
 declare_overloads(p1_consistent_mass_kernel, c="scalar[]", area="scalar[]", out="scalar[]")
 declare_overloads(p1_stiffness_kernel, c="scalar[]", cot_weight="vec3[]", out="scalar[]")

@@ -180,6 +180,45 @@ def koiter_gradient_jet(
     return g1, g2, B[0, 0] * n, two * B[0, 1] * n, B[1, 1] * n
 
 
+@wp.func
+def point_gradient_jet(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    t: int,
+    row: int,
+    q: int,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+    stretching_modulus: Any,
+    bending_modulus: Any,
+    nu: Any,
+    weight: Any,
+    centroid: Any,
+    pressure: wp.float64,
+    with_energy: int,
+    energy_density: wp.array(dtype=wp.float64),
+):
+    """Point q's gradient jet (g, g,1, g,2, g,11, g,12, g,22) of E_S + E_B + E_V (its energy density
+    written with `with_energy`). Volume: 2 μV (V - V̄) ⅓ w [dx·(a_1×a_2) + da_1·(a_2×r) + da_2·(r×a_1)],
+    r = x - x̄ (`pressure` = ⅔ μV (V - V̄))."""
+    inv = ref_metric_inv[q]
+    membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
+        x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
+    )
+    w = ref_weight[q]
+    if with_energy != 0:
+        energy_density[q] = wp.float64(koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu) * w)
+    g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bending, inv, w, stretching_modulus, bending_modulus, nu,
+                                                x1, x2, x11, x12, x22, n, j)  # fmt: skip
+    scale = type(w)(pressure) * weight
+    r = p - centroid
+    return scale * j * n, g1 + scale * wp.cross(x2, r), g2 + scale * wp.cross(r, x1), g11, g12, g22
+
+
 @wp.kernel
 def shell_forces_kernel(
     x: wp.array(dtype=Any),
@@ -199,21 +238,15 @@ def shell_forces_kernel(
     moments: wp.array(dtype=VolumeMoments),
     target: wp.float64,
     penalty: wp.float64,
-    gather: int,
     with_energy: int,
     energy_density: wp.array(dtype=wp.float64),
     forces: wp.array(dtype=Any),
-    jets: wp.array2d(dtype=Any),
 ):
     """One thread per triangle: the energy density at its points (`with_energy`) and the exact forces
     -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `moments` must hold the
-    volume moments; the x̄ part comes from `volume_centroid_force`).
-
-    Each point's gradient jet (g, g,1, g,2, g,11, g,12, g,22) is summed over the points into
-    per-vertex accumulators and added to `forces` with one atomic per patch vertex; with
-    `gather` it is written to `jets` instead, for the deterministic `gather_forces_kernel`.
-    Volume: 2 μV (V - V̄) ⅓ w [dx·(a_1×a_2) + da_1·(a_2×r) + da_2·(r×a_1)], r = x - x̄.
-    """
+    volume moments; the x̄ part comes from `volume_centroid_force`). Each point's gradient jet is
+    summed over the points into per-vertex accumulators and added to `forces` with one atomic per
+    patch vertex."""
     t = wp.tid()
     start = patch_start[t]
     size = patch_start[t + 1] - start
@@ -223,39 +256,62 @@ def shell_forces_kernel(
     for point in range(points_per_triangle):
         q = t * points_per_triangle + point
         row = triangle_type[t] * points_per_triangle + point
-        inv = ref_metric_inv[q]
-        membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
-            x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
-        )
-        w = ref_weight[q]
-        if with_energy != 0:
-            energy_density[q] = wp.float64(koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu) * w)
-        g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bending, inv, w, stretching_modulus, bending_modulus, nu,
-                                                    x1, x2, x11, x12, x22, n, j)  # fmt: skip
-        scale = type(w)(pressure) * weights[point]
-        r = p - centroid
-        g = scale * j * n
-        g1 += scale * wp.cross(x2, r)
-        g2 += scale * wp.cross(r, x1)
-        if gather != 0:
-            jets[q, 0] = g
-            jets[q, 1] = g1
-            jets[q, 2] = g2
-            jets[q, 3] = g11
-            jets[q, 4] = g12
-            jets[q, 5] = g22
-        else:
-            for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
-                if k < size:
-                    b = basis[row, k]
-                    f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
-                    for c in range(3):
-                        accumulated[k, c] = accumulated[k, c] - f[c]
-    if gather == 0:
-        for k in range(wp.static(MAX_PATCH)):
+        g, g1, g2, g11, g12, g22 = point_gradient_jet(
+            x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
+            stretching_modulus, bending_modulus, nu, weights[point], centroid, pressure, with_energy, energy_density,
+        )  # fmt: skip
+        for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
             if k < size:
-                force = type(x[0])(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2])
-                wp.atomic_add(forces, patch_vertices[start + k], force)
+                b = basis[row, k]
+                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
+                for c in range(3):
+                    accumulated[k, c] = accumulated[k, c] - f[c]
+    for k in range(wp.static(MAX_PATCH)):
+        if k < size:
+            force = type(x[0])(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2])
+            wp.atomic_add(forces, patch_vertices[start + k], force)
+
+
+@wp.kernel
+def shell_force_jets_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+    stretching_modulus: Any,
+    bending_modulus: Any,
+    nu: Any,
+    weights: wp.array(dtype=Any),
+    moments: wp.array(dtype=VolumeMoments),
+    target: wp.float64,
+    penalty: wp.float64,
+    with_energy: int,
+    energy_density: wp.array(dtype=wp.float64),
+    jets: wp.array2d(dtype=Any),
+):
+    """As shell_forces_kernel, one thread per quadrature point, writing the point's gradient jet to
+    `jets` for the deterministic `gather_forces_kernel` (no atomics)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    centroid = type(x[0])(moments_centroid(moments, x.shape[0]))
+    pressure = wp.float64(2.0) / wp.float64(3.0) * penalty * (volume_about_centroid(moments, x.shape[0]) - target)
+    g, g1, g2, g11, g12, g22 = point_gradient_jet(
+        x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
+        stretching_modulus, bending_modulus, nu, weights[q % points_per_triangle], centroid, pressure, with_energy,
+        energy_density,
+    )  # fmt: skip
+    jets[q, 0] = g
+    jets[q, 1] = g1
+    jets[q, 2] = g2
+    jets[q, 3] = g11
+    jets[q, 4] = g12
+    jets[q, 5] = g22
 
 
 @wp.kernel
@@ -283,8 +339,8 @@ def volume_about_centroid(moments: wp.array(dtype=VolumeMoments), n_vertices: in
     return moments[0][3] - wp.dot(moments_centroid(moments, n_vertices), moments_normal_sum(moments))
 
 
-@wp.kernel
-def volume_kernel(
+@wp.func
+def volume_item(
     x: wp.array(dtype=Any),
     patch_start: wp.array(dtype=wp.int32),
     patch_vertices: wp.array(dtype=wp.int32),
@@ -292,16 +348,10 @@ def volume_kernel(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
-    reduce: int,
-    terms: wp.array(dtype=VolumeMoments),
-    moments: wp.array(dtype=VolumeMoments),
+    i: int,
 ):
-    """Item i's share of the volume moments [S, V₀, Σx] (float64; launched over max(points,
-    vertices)): quadrature point i's terms of S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω, and control point
-    i's of Σx (docs/theory/shell.md); then V = V₀ - x̄·S about the control centroid (`volume_about_centroid`).
-    Written to `terms`, for a fixed-order or differentiable sum; or, with `reduce`, added to
-    moments[0] (zeroed by the caller; launched on whole blocks, one atomic per block)."""
-    i = wp.tid()
+    """Item i's share of the volume moments: quadrature point i's terms of S = ⅓ ∫ n dω and
+    V₀ = ⅓ ∫ x·n dω, and control point i's of Σx (float64)."""
     area_normal = wp.vec3d()
     moment = wp.float64(0.0)
     xi = wp.vec3d()
@@ -312,11 +362,52 @@ def volume_kernel(
         moment = wp.dot(wp.vec3d(p), area_normal)
     if i < x.shape[0]:
         xi = wp.vec3d(x[i])
-    m = VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2])
-    if reduce != 0:  # uniform over the launch: every thread of a block calls block_add
-        block_add(moments, 0, m)
-    else:
-        terms[i] = m
+    return area_normal, moment, xi
+
+
+@wp.kernel
+def volume_terms_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    terms: wp.array(dtype=VolumeMoments),
+):
+    """terms_i = item i's share of the volume moments (`volume_item`), for a differentiable sum."""
+    i = wp.tid()
+    a, v, y = volume_item(x, patch_start, patch_vertices, triangle_type, basis, weights, points_per_triangle, i)
+    terms[i] = VolumeMoments(a[0], a[1], a[2], v, y[0], y[1], y[2])
+
+
+@wp.kernel
+def volume_kernel(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    items: int,
+    threads: int,
+    moments: wp.array(dtype=VolumeMoments),
+):
+    """moments[0] += the volume moments [S, V₀, Σx] over max(points, vertices) `items`, thread t
+    taking items t, t + threads, ... (`volume_item`; docs/theory/shell.md; V = V₀ - x̄·S about the
+    control centroid, `volume_about_centroid`). Zeroed by the caller; launched on whole blocks, one
+    atomic per block."""
+    area_normal = wp.vec3d()
+    moment = wp.float64(0.0)
+    xi = wp.vec3d()
+    for i in range(wp.tid(), items, threads):
+        a, v, y = volume_item(x, patch_start, patch_vertices, triangle_type, basis, weights, points_per_triangle, i)
+        area_normal += a
+        moment += v
+        xi += y
+    block_add(moments, 0, VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2]))
 
 
 @wp.func
@@ -390,8 +481,10 @@ declare_overloads(koiter_reference_kernel, c="scalar[]", weights="scalar[]", res
 declare_overloads(bilayer_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]",
                   rest_curvature="mat22[]", AC="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE)  # fmt: skip
 declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
-declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", jets="vec3[,]",
-                  **_PATCH, **_REFERENCE, **_MODULI)  # fmt: skip
+declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
+declare_overloads(shell_force_jets_kernel, x="vec3[]", weights="scalar[]", jets="vec3[,]", **_PATCH, **_REFERENCE,
+                  **_MODULI)  # fmt: skip
+declare_overloads(volume_terms_kernel, x="vec3[]", weights="scalar[]", **_PATCH)
 declare_overloads(volume_kernel, x="vec3[]", weights="scalar[]", **_PATCH)
 declare_overloads(volume_centroid_forces_kernel, forces="vec3[]")
 declare_overloads(gather_forces_kernel, jets="vec3[,]", forces="vec3[]", **_PATCH)

@@ -47,14 +47,24 @@ def init_warp() -> None:
 
 
 def set_deterministic(on: bool) -> None:
-    """Bit-exact repeated runs on a GPU: Warp's run-to-run deterministic atomics for every kernel
-    module of wavewarp and every module created later (a CPU run is deterministic either way)."""
+    """Bit-exact repeated runs on a GPU (a CPU run is deterministic either way), for what is built
+    after the call: the shell's forces and the Laplace–Beltrami actions gather in a fixed order,
+    block reductions run in one block, and the remaining atomics use Warp's run-to-run
+    deterministic mode (every kernel module of wavewarp and every module created later)."""
     mode = wp.DeterministicMode.RUN_TO_RUN if on else wp.DeterministicMode.NOT_GUARANTEED
     wp.config.deterministic, wp.config.deterministic_max_records = mode, DETERMINISTIC_RECORDS["default"] if on else 0
     for info in pkgutil.iter_modules(kernels.__path__):
         records = DETERMINISTIC_RECORDS.get(info.name, DETERMINISTIC_RECORDS["default"]) if on else 0
         wp.set_module_options({"deterministic": mode, "deterministic_max_records": records},
                               module=importlib.import_module(f"{kernels.__name__}.{info.name}"))  # fmt: skip
+
+
+def deterministic_default(deterministic=None) -> bool:
+    """`deterministic` as given, or (None) whether `set_deterministic(True)` is in force: what the
+    computing classes choose their fixed-order gathers and single-block reductions by."""
+    if deterministic is None:
+        return wp.config.deterministic != wp.DeterministicMode.NOT_GUARANTEED
+    return bool(deterministic)
 
 
 def resolve_device(device=None) -> wp.context.Device:
@@ -112,8 +122,12 @@ def mat22(scalar):
     return wp.types.matrix((2, 2), scalar)
 
 
-def reduction_threads(n: int) -> int:
-    """Threads of a block-reduction launch over n items: whole blocks of REDUCTION_BLOCK."""
+def reduction_threads(n: int, deterministic=None) -> int:
+    """Threads of a block-reduction launch over n items, each thread taking items t, t + threads, ...:
+    whole blocks of REDUCTION_BLOCK, one item a thread; deterministic, one block (its shared-memory
+    sum has a fixed order; the atomics that join several blocks' sums do not)."""
+    if deterministic_default(deterministic):
+        return int(REDUCTION_BLOCK)
     return -(-n // REDUCTION_BLOCK) * REDUCTION_BLOCK
 
 

@@ -87,6 +87,20 @@ class SurfaceTables(_DeviceArrays):
             self.triangle_type = wp.array(host.triangle_type, dtype=wp.int32)
             self.basis = wp.array(host.basis.astype(real), dtype=vec6(self.scalar))
             self.weights = wp.array(host.weights.astype(real), dtype=self.scalar)
+        self._vertex_entries = None
+
+    def vertex_entries(self) -> list:
+        """For the deterministic gathers (built on first use): each vertex's entries in the patch table,
+        as [vertex_entry_start, vertex_entries, entry_triangle] (a vertex's entries in table order)."""
+        if self._vertex_entries is None:
+            sizes = np.diff(self.host.patch_start)
+            triangle = np.repeat(np.arange(len(sizes)), sizes)
+            vertex = np.asarray(self.host.patch_vertices)
+            order = np.argsort(vertex, kind="stable")
+            start = np.concatenate([[0], np.cumsum(np.bincount(vertex, minlength=self.mesh.n_vertices))])
+            self._vertex_entries = [wp.array(a.astype(np.int32), dtype=wp.int32, device=self.device)
+                                    for a in (start, order, triangle)]  # fmt: skip
+        return self._vertex_entries
 
     def patch(self) -> list:
         """The arguments of every kernel that gathers over a triangle's patch, in their order: patch_start,

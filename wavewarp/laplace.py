@@ -13,7 +13,10 @@ Both expose the same interface, so the two can be charted against each other (do
 `assembled=True` (default) sums K into CSR rows whenever the surface moves and applies it with
 one gather per vertex; `assembled=False` applies it matrix-free, per quadrature point with
 atomic scatter to the patch. Same K; the assembled action is several times faster (measured in
-BENCHMARKS.md), the matrix-free one needs no sparsity pattern.
+BENCHMARKS.md), the matrix-free one needs no sparsity pattern. `deterministic=True` (default: as
+`wavewarp.device.set_deterministic` chose) computes the lumped mass and the matrix-free actions by
+per-point factors and one fixed-order gather per vertex (kernels/laplace.py), bitwise-reproducible
+on a GPU.
 Device-level methods (`*_device`) take and fill Warp arrays without host round-trips, for the
 steppers in `wavewarp.waves`; the NumPy methods are the public API.
 """
@@ -25,7 +28,7 @@ import math
 import numpy as np
 import warp as wp
 
-from .device import mat22, numpy_dtype, run_steps
+from .device import deterministic_default, mat22, numpy_dtype, run_steps, vec3
 from .geometry import LimitMask, SurfaceTables
 from .kernels import laplace as kernels_laplace
 from .kernels.laplace import (
@@ -37,6 +40,9 @@ from .kernels.laplace import (
     consistent_mass_kernel,
     divide_kernel,
     dot_kernel,
+    flux_factors_kernel,
+    gather_point_factors_kernel,
+    mass_factors_kernel,
     normalize_kernel,
     p1_consistent_mass_kernel,
     p1_assemble_kernel,
@@ -47,6 +53,7 @@ from .kernels.laplace import (
     richardson_kernel,
     stiffness_diagonal_kernel,
     stiffness_kernel,
+    surface_metric_factors_kernel,
     surface_metric_kernel,
 )
 from .kernels.limit_surface import limit_positions_kernel
@@ -69,12 +76,13 @@ class LaplaceBeltrami:
     """
 
     def __init__(self, mesh: Mesh, x=None, *, discretization="subdivision", rule="3", assembled=True, device=None,
-                 dtype="float32"):  # fmt: skip
+                 dtype="float32", deterministic=None):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         if discretization not in DISCRETIZATIONS:
             raise ValueError(f"discretization must be one of {', '.join(DISCRETIZATIONS)}, got {discretization!r}")
         self.mesh, self.discretization, self.assembled = mesh, discretization, bool(assembled)
+        self.deterministic = deterministic_default(deterministic) and discretization == "subdivision"
         self._mask = LimitMask.of(mesh, device=device, dtype=dtype)
         self.device, self.scalar, self.vec3 = self._mask.device, self._mask.scalar, self._mask.vec3
         self._real = numpy_dtype(self.scalar)
@@ -85,6 +93,8 @@ class LaplaceBeltrami:
                 self._flux_metric = wp.empty(self.tables.n_quadrature_points, dtype=mat22(self.scalar))
                 self._area = wp.empty(self.tables.n_quadrature_points, dtype=self.scalar)
                 self._j_floor = wp.zeros(self.tables.n_quadrature_points, dtype=self.scalar)
+                self._factors = wp.empty(self.tables.n_quadrature_points if self.deterministic else 0,
+                                         dtype=vec3(self.scalar))  # fmt: skip
             else:
                 self._triangles = wp.array(mesh.triangles, dtype=wp.int32)
                 self._cot_weight = wp.empty(mesh.n_triangles, dtype=self.vec3)
@@ -146,10 +156,14 @@ class LaplaceBeltrami:
         self.mass_device.zero_()
         if self.discretization == "subdivision":
             t = self.tables
-            wp.launch(surface_metric_kernel, dim=t.n_quadrature_points,
-                      inputs=[self._x, *t.weighted_patch(), self._j_floor],
-                      outputs=[self._flux_metric, self._area, self.mass_device],
-                      device=self.device)  # fmt: skip
+            metric = [self._x, *t.weighted_patch(), self._j_floor]
+            if self.deterministic:
+                wp.launch(surface_metric_factors_kernel, dim=t.n_quadrature_points, inputs=metric,
+                          outputs=[self._flux_metric, self._area, self._factors], device=self.device)  # fmt: skip
+                self._gather_factors(self.mass_device)
+            else:
+                wp.launch(surface_metric_kernel, dim=t.n_quadrature_points, inputs=metric,
+                          outputs=[self._flux_metric, self._area, self.mass_device], device=self.device)  # fmt: skip
         else:
             wp.launch(p1_geometry_kernel, dim=self.mesh.n_triangles, inputs=[self._points, self._triangles],
                       outputs=[self._cot_weight, self._area, self.mass_device], device=self.device)  # fmt: skip
@@ -189,6 +203,13 @@ class LaplaceBeltrami:
         t = self.tables
         return t.patch()
 
+    def _gather_factors(self, out: wp.array) -> None:
+        """out_I = Σ N_I s₀ + N_I,1 s₁ + N_I,2 s₂ of the points' factors, in a fixed order (deterministic)."""
+        t = self.tables
+        wp.launch(gather_point_factors_kernel, dim=self.n_vertices,
+                  inputs=[self._factors, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis,
+                          t.points_per_triangle], outputs=[out], device=self.device)  # fmt: skip
+
     def mass(self) -> np.ndarray:
         """(V,) lumped mass: ∫ N_I dω (subdivision; sums to the limit-surface area) or area / 3 (P1)."""
         return self.mass_device.numpy().astype(np.float64)
@@ -212,6 +233,11 @@ class LaplaceBeltrami:
         if self.assembled:
             wp.launch(assembled_stiffness_kernel, dim=self.n_vertices, inputs=[c, self._row_start, self._columns, self._values],
                       outputs=[out], device=self.device)  # fmt: skip
+            return
+        if self.deterministic:
+            wp.launch(flux_factors_kernel, dim=self.tables.n_quadrature_points, inputs=[c, *self._patch(), self._flux_metric],
+                      outputs=[self._factors], device=self.device)  # fmt: skip
+            self._gather_factors(out)
             return
         out.zero_()
         if self.discretization == "subdivision":
@@ -243,6 +269,11 @@ class LaplaceBeltrami:
             wp.launch(assembled_mass_kernel, dim=self.n_vertices,
                       inputs=[c, self._row_start, self._columns, self._mass_values, self._mass_diagonal], outputs=[out],
                       device=self.device)  # fmt: skip
+            return
+        if self.deterministic:
+            wp.launch(mass_factors_kernel, dim=self.tables.n_quadrature_points, inputs=[c, *self._patch(), self._area],
+                      outputs=[self._factors], device=self.device)  # fmt: skip
+            self._gather_factors(out)
             return
         out.zero_()
         if self.discretization == "subdivision":

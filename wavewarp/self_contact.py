@@ -122,8 +122,8 @@ class SelfContact:
             return
         if shell.deterministic:
             wp.launch(quadrature_gather_kernel, dim=shell.mesh.n_vertices,
-                      inputs=[self.pressures, self.area, shell._vertex_entry_start, shell._vertex_entries,
-                              shell._entry_triangle, t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
+                      inputs=[self.pressures, self.area, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis,
+                              t.points_per_triangle],
                       outputs=[forces], device=shell.device)  # fmt: skip
         else:
             patch = t.patch()

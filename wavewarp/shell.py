@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 from .checks import finite, plain, positive
-from .device import block_sum, mat22, numpy_dtype, reduction_threads
+from .device import block_sum, deterministic_default, mat22, numpy_dtype, reduction_threads
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.shell import (
@@ -31,11 +31,13 @@ from .kernels.shell import (
     koiter_energy_kernel,
     koiter_reference_kernel,
     negate_kernel,
+    shell_force_jets_kernel,
     shell_forces_kernel,
     sum_kernel,
     volume_centroid_forces_kernel,
     volume_energy_kernel,
     volume_kernel,
+    volume_terms_kernel,
 )
 from .mesh import Mesh
 from .relax import NEWTON_STEPS, relax
@@ -84,11 +86,12 @@ class Shell:
     thickness h, young Y, poisson ν ∈ (-1, 0.5); AC, AI the active metric and curvature
     couplings; volume_penalty μV; model "koiter" or "bilayer" (bilayer_radius R sets
     A = (AC/2 - AI)/R, default the radius of the sphere with the rest area); rule the quadrature;
-    gradient "analytic" or "autodiff"; deterministic=True sums forces in a fixed order.
+    gradient "analytic" or "autodiff"; deterministic=True sums forces in a fixed order (None: as
+    `wavewarp.device.set_deterministic` chose).
     """
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
-                 model="koiter", *, rule="3", gradient="analytic", deterministic=False, bilayer_radius=None,
+                 model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
                  device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
@@ -106,7 +109,7 @@ class Shell:
             raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
         if gradient not in GRADIENTS:
             raise ValueError(f"gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
-        self.model, self.gradient, self.deterministic = model, gradient, bool(deterministic)
+        self.model, self.gradient, self.deterministic = model, gradient, deterministic_default(deterministic)
 
         self.rule = str(rule)
         self.tables = SurfaceTables.of(mesh, self.rule, device=device, dtype=dtype)
@@ -145,12 +148,6 @@ class Shell:
             self._forces = wp.zeros(mesh.n_vertices, dtype=self.vec3)
             if self.deterministic:
                 self._jets = wp.zeros((n_q, 6), dtype=self.vec3)
-                start, entries, triangle = _vertex_entries(self.tables.host, mesh.n_vertices)
-                self._vertex_entry_start = wp.array(start, dtype=wp.int32)
-                self._vertex_entries = wp.array(entries, dtype=wp.int32)
-                self._entry_triangle = wp.array(triangle, dtype=wp.int32)
-            else:
-                self._jets = wp.zeros((1, 6), dtype=self.vec3)
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
@@ -237,18 +234,19 @@ class Shell:
             block_sum(values, total)
 
     def _launch_volume(self, x: wp.array, differentiable: bool) -> None:
-        """The volume moments [S, V₀, Σx] (kernels/shell.py `volume_kernel`) into self._moments:
-        per-item terms and a fixed-order or differentiable sum, or one block-reducing pass."""
+        """The volume moments [S, V₀, Σx] (kernels/shell.py `volume_kernel`) into self._moments: per-item
+        terms and a differentiable sum, or one block-reducing pass (one block for deterministic shells)."""
         t = self.tables
         patch = [x, *t.weighted_patch()]
-        if differentiable or self.deterministic:
-            wp.launch(volume_kernel, dim=len(self._moment_terms), inputs=patch + [0],
-                      outputs=[self._moment_terms, self._moments], device=self.device)  # fmt: skip
+        n = len(self._moment_terms)
+        if differentiable:
+            wp.launch(volume_terms_kernel, dim=n, inputs=patch, outputs=[self._moment_terms], device=self.device)
             self._sum(self._moment_terms, self._moments, differentiable)
             return
         self._moments.zero_()
-        wp.launch(volume_kernel, dim=reduction_threads(len(self._moment_terms)), inputs=patch + [1],
-                  outputs=[self._moment_terms, self._moments], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
+        threads = reduction_threads(n, self.deterministic)
+        wp.launch(volume_kernel, dim=threads, inputs=patch + [n, threads], outputs=[self._moments],
+                  block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
 
     def _elastic_inputs(self, x: wp.array, moduli=None) -> list:
         t = self.tables
@@ -294,14 +292,16 @@ class Shell:
                           device=self.device)  # fmt: skip
         elif not self.deterministic:
             forces.zero_()  # the atomic scatter adds; the deterministic gather writes
-        wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles,
-                  inputs=self._elastic_inputs(x, moduli) + [t.weights, *volume, int(self.deterministic),
-                                                            int(energy is not None)],
-                  outputs=[self._energy_density, forces, self._jets], device=self.device)  # fmt: skip
-        if self.deterministic:
+        inputs = self._elastic_inputs(x, moduli) + [t.weights, *volume, int(energy is not None)]
+        if not self.deterministic:
+            wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles, inputs=inputs,
+                      outputs=[self._energy_density, forces], device=self.device)  # fmt: skip
+        else:
+            wp.launch(shell_force_jets_kernel, dim=t.n_quadrature_points, inputs=inputs,
+                      outputs=[self._energy_density, self._jets], device=self.device)  # fmt: skip
             wp.launch(gather_forces_kernel, dim=self.mesh.n_vertices,
-                      inputs=[self._jets, self._vertex_entry_start, self._vertex_entries, self._entry_triangle,
-                              t.patch_start, t.triangle_type, t.basis, t.points_per_triangle, *volume],
+                      inputs=[self._jets, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis,
+                              t.points_per_triangle, *volume],
                       outputs=[forces], device=self.device)  # fmt: skip
         if contact and self.self_contact is not None:
             self.self_contact.add_forces(x, forces, None if energy is None else self._energy_density)
@@ -382,14 +382,3 @@ class Shell:
         tol = positive("tol", tol)
         xw = self._set(x0, c, search=False)
         return relax(self, xw, tol, int(max_iterations), callback, method=method, newton_steps=int(newton_steps))
-
-
-def _vertex_entries(host, n_vertices: int):
-    """For the deterministic gather: each vertex's entries in the patch table (in table order) and
-    the triangle of every entry."""
-    sizes = np.diff(host.patch_start)
-    triangle = np.repeat(np.arange(len(sizes)), sizes).astype(np.int32)
-    vertex = np.asarray(host.patch_vertices)
-    order = np.argsort(vertex, kind="stable")
-    start = np.concatenate([[0], np.cumsum(np.bincount(vertex, minlength=n_vertices))])
-    return start.astype(np.int32), order.astype(np.int32), triangle
