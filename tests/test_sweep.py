@@ -124,6 +124,31 @@ def test_a_dask_sweep_killed_midway_resumes_with_the_missing_points(tmp_path):
     assert {name: os.path.getmtime(out / "points" / name) for name in kept} == times
 
 
+@pytest.mark.slow
+def test_sweeps_reuse_a_running_cluster_and_it_stops_on_sigterm(tmp_path):
+    """`wavewarp cluster` prints its scheduler's address; two sweeps sent there one after the other
+    give the table of a sweep on its own cluster; SIGTERM stops it cleanly."""
+    cluster = subprocess.Popen([sys.executable, "-m", "wavewarp.cli", "cluster", "--device", "cpu", "--workers", "2",
+                                "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    try:
+        line = cluster.stdout.readline()
+        address = line.split("scheduler ")[1].split(";")[0]
+        assert "2 workers" in line and address.startswith("tcp://")
+        grid = ["sweep", "cube-waves", "--quick", "--grid", "gamma=0.8,1.1", "--device", "cpu"]
+        for name in ("first", "second"):
+            assert cli.main([*grid, "--scheduler", address, "--out", str(tmp_path / name)]) == 0
+        assert cli.main([*grid, "--workers", "1", "--out", str(tmp_path / "alone")]) == 0
+        tables = [(tmp_path / name / "table.csv").read_text().splitlines() for name in ("first", "second", "alone")]
+        columns = tables[0][0].split(",")
+        kept = [k for k, column in enumerate(columns) if column not in ("wall_time_s", "device")]
+        rows = [[[row.split(",")[k] for k in kept] for row in table[1:]] for table in tables]
+        assert rows[0] == rows[1] == rows[2] and len(rows[0]) == 2
+    finally:
+        cluster.send_signal(signal.SIGTERM)
+        out, _ = cluster.communicate(timeout=60)
+    assert cluster.returncode == 0 and "stopped" in out
+
+
 def test_walker_seeds_perturb_the_rest_shape(monkeypatch):
     """A walker's seed matters once noise > 0 (an ensemble of gaits); noise 0 keeps the scene's mesh."""
     built = []

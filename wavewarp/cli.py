@@ -7,7 +7,9 @@ import argparse
 import importlib
 import json
 import os
+import signal
 import sys
+import threading
 import time
 
 import warp as wp
@@ -23,7 +25,7 @@ from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
 from .relax import RelaxationError
 from .sizing import check_run_size
-from .sweep import SweepSpec, parse_grid, sweep
+from .sweep import SweepSpec, local_cluster, parse_grid, sweep
 from .render import render
 from .trajectory import TrajectoryWriter, read_frames, stored_parameters
 from .usd import UsdAnimation
@@ -123,6 +125,24 @@ def _sweep(args) -> int:
     counts = {status: sum(row["status"] == status for row in rows) for status in ("done", "stopped", "failed")}
     print(f"{len(rows)} points in {args.out} ({', '.join(f'{n} {s}' for s, n in counts.items())}): table.csv, chart.png "
           f"({time.perf_counter() - start:.1f} s)")  # fmt: skip
+    return 0
+
+
+def _cluster(args) -> int:
+    """A local Dask cluster kept running for sweeps (`--scheduler ADDRESS`) until interrupted: its workers
+    start, import and load their kernels once, not once per sweep."""
+    wp.config.log_level = wp.LOG_WARNING
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    with local_cluster(args.device, args.workers, args.port) as cluster:
+        print(f"wavewarp cluster: {len(cluster.workers)} workers; scheduler {cluster.scheduler_address}; dashboard "
+              f"{cluster.dashboard_link}\nrun sweeps with --scheduler {cluster.scheduler_address}; stop with Ctrl-C",
+              flush=True)  # fmt: skip
+        try:
+            stop.wait()
+        except KeyboardInterrupt:
+            pass
+    print("wavewarp cluster: stopped; the workers' compiled kernels are in this machine's Warp cache")
     return 0
 
 
@@ -240,6 +260,12 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
     _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)
+    cluster = commands.add_parser("cluster", help="keep a local Dask cluster running for sweeps (--scheduler ADDRESS)")
+    cluster.add_argument("--device", default=None, choices=("cpu", "cuda"),
+                         help="cpu, or cuda (one worker per GPU); default: CUDA when present")  # fmt: skip
+    cluster.add_argument("--workers", type=int, default=None, help="CPU workers (default: one per core)")
+    cluster.add_argument("--port", type=int, default=8786, help="the scheduler's port (default 8786; 0: any free one)")
+    cluster.set_defaults(run=_cluster)
     draw = commands.add_parser("render", help="draw a mesh's Loop limit surface to USD, coloured by mean curvature")
     draw.add_argument("--mesh", default="icosphere", help="icosphere, cube, prism or a mesh file (default icosphere)")
     draw.add_argument("--level", type=int, default=3, help="icosphere level, or cube/prism divisions / 2 (default 3)")

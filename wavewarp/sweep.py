@@ -182,12 +182,13 @@ def prepare_folder(spec: SweepSpec, out: str) -> None:
 
 
 @contextlib.contextmanager
-def local_cluster(device: str | None = None, workers: int | None = None):
+def local_cluster(device: str | None = None, workers: int | None = None, port: int = 0):
     """A Dask cluster on this machine: one single-threaded worker per GPU this process sees
     (CUDA_VISIBLE_DEVICES of the worker set to it) when CUDA is present and `device` is not "cpu",
-    else `workers` CPU workers (default: one per core). Each worker has its own WARP_CACHE_PATH,
-    seeded from this process's kernel cache, so that no cache is written by two processes; the
-    kernels the workers compiled are copied back into it at the end, so the next sweep starts warm."""
+    else `workers` CPU workers (default: one per core); its scheduler on `port` (0: any free one).
+    Each worker has its own WARP_CACHE_PATH, seeded from this process's kernel cache, so that no
+    cache is written by two processes; the kernels the workers compiled are copied back into it at
+    the end, so the next cluster starts warm."""
     init_warp()
     gpus = 0 if device == "cpu" else wp.get_cuda_device_count()
     visible = [v for v in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",") if v.strip()] or [str(k) for k in range(gpus)]
@@ -201,8 +202,8 @@ def local_cluster(device: str | None = None, workers: int | None = None):
         env = {"WARP_CACHE_PATH": cache, "CUDA_VISIBLE_DEVICES": visible[k] if gpus else "", "OMP_NUM_THREADS": "1"}
         specification[f"worker-{k}"] = {"cls": Nanny, "options": {"nthreads": 1, "env": env, "silence_logs": logging.ERROR}}
     try:
-        with SpecCluster(workers=specification, scheduler={"cls": Scheduler, "options": {"dashboard_address": ":0"}},
-                         silence_logs=logging.ERROR) as cluster:  # fmt: skip
+        scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0", "port": int(port)}}
+        with SpecCluster(workers=specification, scheduler=scheduler, silence_logs=logging.ERROR) as cluster:
             yield cluster
     finally:
         for cache in caches:
