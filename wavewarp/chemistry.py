@@ -13,6 +13,7 @@ the consistent Galerkin mass (docs/theory/chemistry.md).
 
 from __future__ import annotations
 
+import functools
 import math
 from abc import ABC, abstractmethod
 
@@ -207,11 +208,12 @@ def fhn_reaction_lipschitz(nu: float) -> float:
     return max(abs(-3 * c * c + 2 * (1 + nu) * c - nu) for c in candidates)
 
 
+@functools.lru_cache(maxsize=64)
 def fhn_kinetic_period(nu=-0.01, kappa=1e-4, epsilon=0.005) -> float:
     """The limit-cycle period of the FHN kinetics without diffusion, ċ = c(1-c)(c-ν) - w,
     ẇ = ε(c - κw) (ν < 0: the rest state is an unstable focus and the medium oscillates). The mean of
     the last cycles of an adaptive Runge–Kutta solve from c = 0.1; default values: 275.7. Raises
-    ValueError when the kinetics do not oscillate."""
+    ValueError when the kinetics do not oscillate. Kept per (ν, κ, ε): every walker built asks for it."""
     from scipy.integrate import solve_ivp
 
     def rates(_, y):
