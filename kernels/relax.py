@@ -20,8 +20,9 @@ ACCEPTED, PROBING, TRIES, ITERATION, STATUS, RESTART, MOVED, STALLED, FAR_TRIAL,
 FLAGS_SIZE = 10
 # flags[STATUS]; STALE: x left a quarter of the self-contact search's skin, the caller searches again and goes on
 RUNNING, CONVERGED, BUDGET_SPENT, NO_DESCENT, STALE = range(5)
-# sums[...] (the shell's scalar): F·s, F·(s − s_old), F·d, max |F|
-FS_SUM, FDS_SUM, FD_SUM, FMAX_SUM = range(4)
+# sums[...] (the shell's scalar): F·s, F·(s − s_old), F·d; max |F| in an array of its own (`largest`:
+# Warp's deterministic mode compiles atomic adds and maxima only on separate arrays)
+FS_SUM, FDS_SUM, FD_SUM = range(3)
 
 ARMIJO = 1e-4
 MAX_TRIES = 40  # halvings of the step before the search gives up (round-off floor)
@@ -30,19 +31,20 @@ MAX_STALLED = 40  # accepted steps in a row that lower neither E nor max |F| (ro
 
 @wp.kernel
 def start_kernel(forces: wp.array(dtype=Any), inverse_stiffness: wp.array(dtype=Any), s: wp.array(dtype=Any),
-                 direction: wp.array(dtype=Any), sums: wp.array(dtype=Any)):  # fmt: skip
-    """s = P F, d = s; sums += [F·s, -, -, max |F|] (sums zeroed by the caller)."""
+                 direction: wp.array(dtype=Any), sums: wp.array(dtype=Any), largest: wp.array(dtype=Any)):  # fmt: skip
+    """s = P F, d = s; sums[FS_SUM] += F·s, largest = max |F| (both zeroed by the caller)."""
     i = wp.tid()
     f = forces[i]
     si = inverse_stiffness[i] * f
     s[i] = si
     direction[i] = si
     wp.atomic_add(sums, FS_SUM, wp.dot(f, si))
-    wp.atomic_max(sums, FMAX_SUM, wp.length(f))
+    wp.atomic_max(largest, 0, wp.length(f))
 
 
 @wp.kernel
-def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype=Any), search: wp.array(dtype=wp.float64),
+def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype=Any), largest: wp.array(dtype=Any),
+                        search: wp.array(dtype=wp.float64),
                         flags: wp.array(dtype=wp.int32), history: wp.array(dtype=wp.float64),
                         condition: wp.array(dtype=wp.int32)):  # fmt: skip
     """First step length 1 along d = s; stop at once if x is already in equilibrium."""
@@ -52,7 +54,7 @@ def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype
     search[SLOPE] = -fs
     search[ALPHA] = wp.float64(1.0)
     search[CANDIDATE] = wp.float64(1.0)
-    search[RESIDUAL] = wp.float64(sums[FMAX_SUM]) / search[FORCE_SCALE]
+    search[RESIDUAL] = wp.float64(largest[0]) / search[FORCE_SCALE]
     search[BEST_RESIDUAL] = search[RESIDUAL]
     flags[PROBING] = 1
     flags[STALLED] = 0
@@ -141,9 +143,10 @@ def line_search_kernel(trial_energy: wp.array(dtype=wp.float64), dot: wp.array(d
 @wp.kernel
 def accept_kernel(flags: wp.array(dtype=wp.int32), trial: wp.array(dtype=Any), trial_forces: wp.array(dtype=Any),
                   inverse_stiffness: wp.array(dtype=Any), x: wp.array(dtype=Any), forces: wp.array(dtype=Any),
-                  s: wp.array(dtype=Any), s_old: wp.array(dtype=Any), sums: wp.array(dtype=Any)):  # fmt: skip
+                  s: wp.array(dtype=Any), s_old: wp.array(dtype=Any), sums: wp.array(dtype=Any),
+                  largest: wp.array(dtype=Any)):  # fmt: skip
     """After an accepted step: x, F ← the trial's; s_old ← s; s = P F;
-    sums += [F·s, F·(s − s_old), -, max |F|] (sums zeroed by the caller)."""
+    sums += [F·s, F·(s − s_old), -], largest = max |F| (both zeroed by the caller)."""
     if flags[ACCEPTED] == 0:
         return
     i = wp.tid()
@@ -156,7 +159,7 @@ def accept_kernel(flags: wp.array(dtype=wp.int32), trial: wp.array(dtype=Any), t
     s[i] = si
     wp.atomic_add(sums, FS_SUM, wp.dot(f, si))
     wp.atomic_add(sums, FDS_SUM, wp.dot(f, si - previous))
-    wp.atomic_max(sums, FMAX_SUM, wp.length(f))
+    wp.atomic_max(largest, 0, wp.length(f))
 
 
 @wp.kernel
@@ -186,7 +189,8 @@ def direction_kernel(flags: wp.array(dtype=wp.int32), s: wp.array(dtype=Any), fo
 
 
 @wp.kernel
-def iteration_kernel(flags: wp.array(dtype=wp.int32), sums: wp.array(dtype=Any), search: wp.array(dtype=wp.float64),
+def iteration_kernel(flags: wp.array(dtype=wp.int32), sums: wp.array(dtype=Any), largest: wp.array(dtype=Any),
+                     search: wp.array(dtype=wp.float64),
                      history: wp.array(dtype=wp.float64), condition: wp.array(dtype=wp.int32)):  # fmt: skip
     """Close an accepted iteration: restart along s if d does not descend; record E; stop when
     max |F| ≤ tol · Y h ℓ̄, when the iteration budget is spent, or when MAX_STALLED steps in a
@@ -204,7 +208,7 @@ def iteration_kernel(flags: wp.array(dtype=wp.int32), sums: wp.array(dtype=Any),
     search[SLOPE] = -fd
     search[CANDIDATE] = search[ALPHA]
     flags[PROBING] = 1
-    residual = wp.float64(sums[FMAX_SUM]) / search[FORCE_SCALE]
+    residual = wp.float64(largest[0]) / search[FORCE_SCALE]
     search[RESIDUAL] = residual
     if search[ENERGY] < history[iteration - 1] or residual < search[BEST_RESIDUAL]:
         flags[STALLED] = 0
@@ -243,14 +247,14 @@ def restart_kernel(flags: wp.array(dtype=wp.int32), s: wp.array(dtype=Any), dire
 
 
 _V, _S = "vec3[]", "scalar[]"
-declare_overloads(start_kernel, forces=_V, inverse_stiffness=_S, s=_V, direction=_V, sums=_S)
-declare_overloads(start_search_kernel, sums=_S)
+declare_overloads(start_kernel, forces=_V, inverse_stiffness=_S, s=_V, direction=_V, sums=_S, largest=_S)
+declare_overloads(start_search_kernel, sums=_S, largest=_S)
 declare_overloads(trial_kernel, x=_V, direction=_V, trial=_V, dot=_S)
 declare_overloads(slope_kernel, forces=_V, direction=_V, dot=_S)
 declare_overloads(line_search_kernel, dot=_S)
 declare_overloads(accept_kernel, trial=_V, trial_forces=_V, inverse_stiffness=_S, x=_V, forces=_V, s=_V, s_old=_V,
-                  sums=_S)  # fmt: skip
+                  sums=_S, largest=_S)  # fmt: skip
 declare_overloads(beta_kernel, sums=_S)
 declare_overloads(direction_kernel, s=_V, forces=_V, direction=_V, sums=_S)
-declare_overloads(iteration_kernel, sums=_S)
+declare_overloads(iteration_kernel, sums=_S, largest=_S)
 declare_overloads(restart_kernel, s=_V, direction=_V)

@@ -6,8 +6,9 @@ implicit diffusion is solved by the Jacobi-preconditioned conjugate gradients be
 Here `acceleration` is the diffusion term's `M̃⁻¹ K c` (wavewarp/waves.py builds it), so the
 kernels below see only per-vertex numbers. One int32 flag per stepper, read once per chunk
 (docs/theory/scenes.md), says what failed: RUNAWAY (NaN/Inf or past the limit) or FLIP_FLOP (FHN's bounded
-period-2 oscillation past its time-step bound). Reductions sum interleaved strides per thread and
-add the partial sums atomically: no tile kernels, no host round-trips, graph-capturable.
+period-2 oscillation past its time-step bound). The CG's dot products (kernels/laplace.py `dot_kernel`)
+sum interleaved strides per thread and add the partial sums atomically: no host round-trips,
+graph-capturable.
 """
 
 from typing import Any

@@ -2,10 +2,14 @@
 gathers and one-block reductions compute the sums the atomic scatters do (float64, to round-off),
 every solver built after the switch uses them, and on a GPU two runs agree bit for bit."""
 
+import importlib
+import pkgutil
+
 import numpy as np
 import pytest
 import warp as wp
 
+from wavewarp import kernels
 from wavewarp.device import reduction_threads, set_deterministic
 from wavewarp.kernels.dynamics import eval_rigid_correction
 from wavewarp.laplace import LaplaceBeltrami
@@ -114,3 +118,11 @@ def test_the_deterministic_walker_follows_the_default_one():
     radius = np.abs(default[1]).max()
     assert np.abs(fixed[1] - default[1]).max() < 1e-9 * radius
     assert np.abs(fixed[0] - default[0]).max() < 1e-9 * radius
+
+
+@pytest.mark.slow
+def test_every_kernel_module_compiles_in_deterministic_mode(deterministic):
+    """Warp's deterministic mode refuses some atomic patterns at code generation (an array that receives
+    both adds and maxima, for one): every kernel module of wavewarp, every overload, compiles under it."""
+    for info in pkgutil.iter_modules(kernels.__path__):
+        wp.load_module(importlib.import_module(f"{kernels.__name__}.{info.name}"), device="cpu")

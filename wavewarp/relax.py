@@ -96,7 +96,8 @@ class Relaxation:
             self.s, self.s_old, self.direction = (wp.zeros(n, dtype=vec3) for _ in range(3))
             self.inverse_stiffness = wp.array(_inverse_stiffness(shell).astype(shell._real), dtype=scalar)
             self.energy, self.trial_energy = wp.zeros(1, dtype=wp.float64), wp.zeros(1, dtype=wp.float64)
-            self.sums, self.dot = wp.zeros(4, dtype=scalar), wp.zeros(1, dtype=scalar)
+            self.sums = wp.zeros(3, dtype=scalar)
+            self.largest, self.dot = wp.zeros(1, dtype=scalar), wp.zeros(1, dtype=scalar)
             self.search = wp.zeros(SEARCH_SIZE, dtype=wp.float64)
             self.flags, self.condition = wp.zeros(FLAGS_SIZE, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
         self.history = None  # E after each accepted step, capacity max_iterations + 1
@@ -151,8 +152,10 @@ class Relaxation:
         shell, n = self.shell, self.shell.mesh.n_vertices
         shell.forces_device(self.x, self.forces, self.energy)
         self.sums.zero_()
-        wp.launch(start_kernel, dim=n, inputs=[self.forces, self.inverse_stiffness], outputs=[self.s, self.direction, self.sums])
-        wp.launch(start_search_kernel, dim=1, inputs=[self.energy, self.sums],
+        self.largest.zero_()
+        wp.launch(start_kernel, dim=n, inputs=[self.forces, self.inverse_stiffness],
+                  outputs=[self.s, self.direction, self.sums, self.largest])  # fmt: skip
+        wp.launch(start_search_kernel, dim=1, inputs=[self.energy, self.sums, self.largest],
                   outputs=[self.search, self.flags, self.history, self.condition])  # fmt: skip
 
     def _pass(self) -> None:
@@ -167,12 +170,13 @@ class Relaxation:
         wp.launch(line_search_kernel, dim=1, inputs=[self.trial_energy, self.dot],
                   outputs=[self.search, self.flags, self.condition])  # fmt: skip
         self.sums.zero_()
+        self.largest.zero_()
         wp.launch(accept_kernel, dim=n, inputs=[self.flags, self.trial, self.trial_forces, self.inverse_stiffness],
-                  outputs=[self.x, self.forces, self.s, self.s_old, self.sums])  # fmt: skip
+                  outputs=[self.x, self.forces, self.s, self.s_old, self.sums, self.largest])  # fmt: skip
         wp.launch(beta_kernel, dim=1, inputs=[self.flags, self.sums], outputs=[self.search])
         wp.launch(direction_kernel, dim=n, inputs=[self.flags, self.s, self.forces, self.search],
                   outputs=[self.direction, self.sums])  # fmt: skip
-        wp.launch(iteration_kernel, dim=1, inputs=[self.flags, self.sums, self.search],
+        wp.launch(iteration_kernel, dim=1, inputs=[self.flags, self.sums, self.largest, self.search],
                   outputs=[self.history, self.condition])  # fmt: skip
         wp.launch(restart_kernel, dim=n, inputs=[self.flags, self.s], outputs=[self.direction])
 
