@@ -1,6 +1,6 @@
 """Sweep scaling benchmark (docs/theory/sweeps.md): one sweep on 1, 2, 4, ... GPUs (or CPU workers).
 
-    wavewarp bench sweep_scaling --device cuda --workers 1,2 --out benchmarks/results [--deterministic]
+    wavewarp bench sweep_scaling --device cuda --workers 1,2 --out benchmarks/results [--deterministic] [--kept-cluster]
     wavewarp bench sweep_scaling --quick --device cpu --workers 1,2 --out DIR     # a CPU smoke run
 
 Runs the same sweep (default: the sphere walker at level 3 over 2 periods, AC ∈ {0, 0.1, 0.2, 0.3}
@@ -12,14 +12,18 @@ steps per second, the parallel efficiency against the smallest N, the points' ow
 (summed, and the longest: what the workers could not share), and how many table values
 differ from the smallest N's (0 expected with --deterministic; on a GPU float atomics otherwise
 reorder sums from run to run: the warm-up sweep, the same sweep run again on the smallest N, gives
-that run-to-run baseline); and the chart, sweep_scaling_DEVICE[_deterministic].png.
+that run-to-run baseline); and the chart, sweep_scaling_DEVICE[_deterministic].png. With
+`--kept-cluster`, each N is also timed on a `wavewarp cluster` kept running (the second sweep sent
+there: no cluster start, imports or kernel loading in its wall time).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -41,17 +45,36 @@ QUICK = ["cube-waves", "--quick", "--grid", "gamma=0.8,0.9,1.0,1.1"]
 TIMING = ("wall_time_s", "device")  # columns that may differ between equal runs
 
 
-def run_sweep(arguments, out: str, workers: int, device: str) -> float:
-    """One sweep in a fresh process on `workers` GPUs (the first ones) or CPU workers; its wall time."""
+def workers_command(command: list, workers: int, device: str):
+    """`command` and its environment for `workers` GPUs (the first ones) or CPU workers."""
     env = dict(os.environ)
-    command = [sys.executable, "-m", "wavewarp.cli", "sweep", *arguments, "--device", device, "--out", out]
     if device == "cuda":
         env["CUDA_VISIBLE_DEVICES"] = ",".join(str(k) for k in range(workers))
-    else:
-        command += ["--workers", str(workers)]
+        return command, env
+    return command + ["--workers", str(workers)], env
+
+
+def run_sweep(arguments, out: str, workers: int, device: str, scheduler: str | None = None) -> float:
+    """One sweep in a fresh process, on its own cluster of `workers` or sent to `scheduler`; its wall time."""
+    command = [sys.executable, "-m", "wavewarp.cli", "sweep", *arguments, "--device", device, "--out", out]
+    command, env = (command + ["--scheduler", scheduler], dict(os.environ)) if scheduler else \
+        workers_command(command, workers, device)  # fmt: skip
     start = time.perf_counter()
     subprocess.run(command, env=env, check=True, capture_output=True, text=True)
     return time.perf_counter() - start
+
+
+@contextlib.contextmanager
+def kept_cluster(workers: int, device: str):
+    """`wavewarp cluster` on `workers` GPUs or CPU workers, stopped at the end; yields its scheduler's address."""
+    command, env = workers_command([sys.executable, "-m", "wavewarp.cli", "cluster", "--device", device, "--port", "0"],
+                                   workers, device)  # fmt: skip
+    cluster = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        yield cluster.stdout.readline().split("scheduler ")[1].split(";")[0]
+    finally:
+        cluster.send_signal(signal.SIGTERM)
+        cluster.communicate(timeout=120)
 
 
 def table(out: str) -> dict:
@@ -76,6 +99,8 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="4 quick cube-waves points (a CPU smoke run)")
     parser.add_argument("--deterministic", action="store_true",
                         help="bit-exact runs (wavewarp.device.set_deterministic) in every sweep")
+    parser.add_argument("--kept-cluster", action="store_true",
+                        help="also time each sweep sent to a `wavewarp cluster` kept running (its second sweep)")
     parser.add_argument("--out", default="benchmarks/results")
     args = parser.parse_args(argv)
     counts = sorted({int(n) for n in args.workers.split(",")})
@@ -101,11 +126,23 @@ def main(argv=None) -> int:
                    "points_wall_sum_s": sum(point_walls), "longest_point_s": max(point_walls),
                    "differing_values": differing(results, reference)}  # fmt: skip
             row["efficiency"] = rows[0]["wall_s"] * rows[0]["workers"] / (wall * n) if rows else 1.0
-            rows.append(row)
             print(f"{n:3d} {args.device} workers: {wall:7.1f} s, {row['steps_per_s']:10.4g} steps/s, efficiency "
                   f"{row['efficiency']:.2f}, points {row['points_wall_sum_s']:.1f} s in all (longest "
                   f"{row['longest_point_s']:.1f} s), {row['differing_values']} table values differ from {counts[0]}",
                   flush=True)  # fmt: skip
+            if args.kept_cluster:  # a second sweep sent to a cluster kept running: no start-up in its wall time
+                with kept_cluster(n, args.device) as address:
+                    run_sweep(arguments, os.path.join(scratch, f"kept-warm-up-{n}"), n, args.device, address)
+                    row["kept_cluster_wall_s"] = run_sweep(arguments, os.path.join(scratch, f"kept-{n}"), n, args.device,
+                                                           address)  # fmt: skip
+                first = rows[0] if rows else row
+                kept = first["kept_cluster_wall_s"] * first["workers"]
+                row["kept_cluster_efficiency"] = kept / (row["kept_cluster_wall_s"] * n)
+                row["kept_cluster_differing_values"] = differing(table(os.path.join(scratch, f"kept-{n}")), reference)
+                print(f"    with the cluster kept running: {row['kept_cluster_wall_s']:7.1f} s, efficiency "
+                      f"{row['kept_cluster_efficiency']:.2f}, {row['kept_cluster_differing_values']} table values "
+                      f"differ from {counts[0]}", flush=True)  # fmt: skip
+            rows.append(row)
             write_results(result, args, device, os.path.join(args.out, name))  # each worker count as it ends
     return 0
 
@@ -116,7 +153,10 @@ def write_results(result: dict, args, device, stem: str) -> None:
     rows = result["rows"]
     counts = [r["workers"] for r in rows]
     fig, ax = plt.subplots(figsize=(5.2, 3.8))
-    ax.plot(counts, [r["steps_per_s"] for r in rows], "o-", label="measured")
+    ax.plot(counts, [r["steps_per_s"] for r in rows], "o-", label="a cluster started by each sweep")
+    if "kept_cluster_wall_s" in rows[0]:
+        work = rows[0]["steps_per_s"] * rows[0]["wall_s"]
+        ax.plot(counts, [work / r["kept_cluster_wall_s"] for r in rows], "s-", label="a cluster kept running")
     ax.plot(counts, [rows[0]["steps_per_s"] * n / counts[0] for n in counts], "k--", lw=1, label="ideal")
     ax.set_xlabel(f"{'GPUs' if args.device == 'cuda' else 'CPU workers'} (one Dask worker each)")
     ax.set_ylabel("aggregate steps per second")
