@@ -21,7 +21,7 @@ from wavewarp import cli, kernels, walker
 from wavewarp.device import set_deterministic
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import SceneError, load_scene, resolve
-from wavewarp.sweep import Point, SweepSpec, grid_points, merge_kernel_cache, parse_grid, sweep
+from wavewarp.sweep import Point, SweepSpec, batches, grid_points, merge_kernel_cache, parse_grid, sweep
 
 QUICK_CUBE = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True, device="cpu")
 
@@ -52,6 +52,19 @@ def test_grid_points_vary_the_first_parameter_slowest_and_the_seed_fastest():
 def test_bad_grids_are_named(items, message):
     with pytest.raises(ValueError, match=message):
         parse_grid(items)
+
+
+def test_batches_deal_the_grid_round_robin():
+    """Every point in exactly one batch, batches of at most B differing by at most one point, and a
+    block of neighbouring (alike) points spread over the batches."""
+    points = list(range(10))
+    dealt = batches(points, 4)
+    assert sorted(p for batch in dealt for p in batch) == points
+    assert [len(b) for b in dealt] == [4, 3, 3]
+    assert all(len({p // 3 for p in batch}) == len(batch) for batch in dealt)  # blocks of 3 alike points
+    assert batches(points, 1) == [[p] for p in points]
+    with pytest.raises(ValueError, match="--batch must be an integer >= 1"):
+        batches(points, 0)
 
 
 def test_bad_points_are_refused_before_anything_runs(tmp_path):

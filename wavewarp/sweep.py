@@ -162,9 +162,13 @@ def run_batch(spec: SweepSpec, points, out: str) -> list:
 
 
 def batches(points, size: int) -> list:
+    """The points dealt round-robin into ceil(n / size) batches of at most `size`: neighbours in the
+    grid (which often cost alike: one twin, one coupling) go to different batches, so that batches cost
+    about the same."""
     if int(size) < 1:
         raise ValueError(f"--batch must be an integer >= 1, got {size!r}")
-    return [points[k:k + int(size)] for k in range(0, len(points), int(size))]
+    count = -(-len(points) // int(size))
+    return [points[k::count] for k in range(count)]
 
 
 def prepare_folder(spec: SweepSpec, out: str) -> None:
