@@ -93,10 +93,10 @@ def test_free_shell_conserves_momentum_and_angular_momentum(device, rng):
 
 
 def test_a_new_rest_volume_reaches_the_captured_dynamics_steps(device):
-    """V̄ is a launch argument of the force step, and on CUDA the steps run as a captured graph: a V̄
-    set after the first steps must reach the next ones (the shell's revision drops the graph). The
-    reference: a stepper built afresh with the new V̄ from the same state. On the CPU the steps are
-    not captured, and this checks the same semantics."""
+    """V̄ is a launch argument of the force step, and the steps run as a captured graph (a CUDA graph,
+    or Warp's CPU graph): a V̄ set after the first steps must reach the next ones (the shell's
+    revision drops the graph). The reference: a stepper built afresh with the new V̄ from the same
+    state."""
     mesh = icosphere(1.0, 2)
 
     def stepper(rest_volume=None, x0=None, v0=None, dt=None, omega=None):

@@ -173,6 +173,7 @@ def test_steps_past_a_frame_leave_the_trace_buffer_alone():
     backing = wp.zeros((3 * rows, run._trace_rows.shape[1]), dtype=wp.float64, device="cpu")
     backing.assign(np.full(backing.shape, 7.0))
     run._trace_rows = buffer = backing[:rows]
+    run.coupled.notify_model_changed()  # captured steps keep the arrays they were captured with
     run._trace_row.zero_()
     run.coupled.advance(3 * rows)
     assert run._trace_row.numpy()[0] == 3 * rows

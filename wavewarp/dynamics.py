@@ -311,7 +311,7 @@ class ShellDynamics(Stepper):
         self.solver = self.solver_type(shell, density=density, gravity=gravity, ground=ground, **solver_options)
         self.shell, self.ground, self.device, self.scalar = shell, ground, self.solver.device, self.solver.scalar
         self.safety = self.checked_safety(safety)
-        self.capture = bool(capture) and wp.get_device(self.device).is_cuda
+        self.capture = bool(capture)
         self.state = self.solver.state(x0, v0)
         c = np.zeros(shell.mesh.n_vertices) if c is None else shell.checked_concentrations(c)
         shell.update_reference(wp.array(c.astype(shell._real), dtype=self.scalar, device=self.device))
