@@ -57,8 +57,10 @@ def workers_command(command: list, workers: int, device: str):
 def run_sweep(arguments, out: str, workers: int, device: str, scheduler: str | None = None) -> float:
     """One sweep in a fresh process, on its own cluster of `workers` or sent to `scheduler`; its wall time."""
     command = [sys.executable, "-m", "wavewarp.cli", "sweep", *arguments, "--device", device, "--out", out]
-    command, env = (command + ["--scheduler", scheduler], dict(os.environ)) if scheduler else \
-        workers_command(command, workers, device)  # fmt: skip
+    if scheduler:
+        command, env = command + ["--scheduler", scheduler], dict(os.environ)
+    else:
+        command, env = workers_command(command, workers, device)
     start = time.perf_counter()
     subprocess.run(command, env=env, check=True, capture_output=True, text=True)
     return time.perf_counter() - start

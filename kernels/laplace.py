@@ -243,18 +243,10 @@ def flux_factors_kernel(
     flux_metric: wp.array(dtype=Any),
     factors: wp.array(dtype=Any),
 ):
-    """factors_q = (0, D^{1β} c,β, D^{2β} c,β): the stiffness action's, for the gather (c,β as stiffness_kernel)."""
+    """factors_q = (0, D^{1β} c,β, D^{2β} c,β): the stiffness action's, for the gather (c,β by `patch_tangents`)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    start = patch_start[t]
-    c0 = c[patch_vertices[start]]
-    g1 = c0 - c0
-    g2 = g1
-    for k in range(1, patch_start[t + 1] - start):
-        d = c[patch_vertices[start + k]] - c0
-        b = basis[row, k]
-        g1 += b[1] * d
-        g2 += b[2] * d
+    g1, g2 = patch_tangents(c, patch_start, patch_vertices, basis, t, row)
     D = flux_metric[q]
     factors[q] = type(factors[q])(type(g1)(0.0), D[0, 0] * g1 + D[0, 1] * g2, D[1, 0] * g1 + D[1, 1] * g2)
 

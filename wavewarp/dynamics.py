@@ -106,7 +106,7 @@ class InertialSolver:
             raise ValueError(f"gravity and damping must be >= 0, got gravity={plain(gravity)!r}, damping={plain(damping)!r}")
         mesh = shell.mesh
         n = mesh.n_vertices
-        self._reduction_threads = reduction_threads(n)
+        self._reduction_threads = reduction_threads(n, shell.deterministic)
         rest = LaplaceBeltrami(mesh, rule=shell.rule, device=self.device, dtype="float64")
         self.mass = self.density * rest.mass()  # ρ ∫ N_I dω̄⁰ on the rest surface
         self.total_mass = float(self.mass.sum())

@@ -153,7 +153,8 @@ class LaplaceBeltrami:
         wp.launch(limit_positions_kernel, dim=self.n_vertices,
                   inputs=[self._x, self._mask.ring_start, self._mask.ring, self._mask.centre_weight,
                           self._mask.ring_weight], outputs=[self._points], device=self.device)  # fmt: skip
-        self.mass_device.zero_()
+        if not self.deterministic:
+            self.mass_device.zero_()  # the scatters add; the gather writes
         if self.discretization == "subdivision":
             t = self.tables
             metric = [self._x, *t.weighted_patch(), self._j_floor]
