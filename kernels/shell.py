@@ -3,6 +3,10 @@
 Global sums (energy, volume) accumulate in float64 whatever the dtype, so that float32 runs
 resolve energy changes and V - V̄ far below the float32 spacing of their totals.
 
+Batched worlds (`Mesh.union`): the arrays hold `worlds` equal blocks (world w's vertices, triangles
+and points contiguous); per-world parameters (AC, AI, moduli, V̄, μV) are arrays indexed by the
+item's world, and the volume moments are one per world.
+
 One thread per quadrature point. The active reference (ā⁻¹, ā, b̄, dω̄ weight) is computed by
 `koiter_reference_kernel` or `bilayer_reference_kernel` whenever c changes; the energy kernels read it. Forces are the exact
 negative gradient, scattered to the patch's control vertices with atomics, or (deterministic)
@@ -43,19 +47,21 @@ def koiter_reference_kernel(
     points_per_triangle: int,
     rest_metric: wp.array(dtype=Any),
     rest_curvature: wp.array(dtype=Any),
-    AC: Any,
-    AI: Any,
+    AC: wp.array(dtype=Any),
+    AI: wp.array(dtype=Any),
+    worlds: int,
     ref_metric: wp.array(dtype=Any),
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
     ref_weight: wp.array(dtype=Any),
 ):
-    """ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰ (paper Eq. 2; docs/theory/shell.md)."""
+    """ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰ (paper Eq. 2; docs/theory/shell.md), AC and AI of q's world."""
     q = wp.tid()
+    w = q // (rest_metric.shape[0] // worlds)
     t, row = basis_row(triangle_type, points_per_triangle, q)
     cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
-    a_bar = wp.exp(-AC * cq) * rest_metric[q]
-    b_bar = (type(cq)(1.0) - AI * cq) * rest_curvature[q]
+    a_bar = wp.exp(-AC[w] * cq) * rest_metric[q]
+    b_bar = (type(cq)(1.0) - AI[w] * cq) * rest_curvature[q]
     store_reference(q, a_bar, b_bar, weights[q % points_per_triangle], ref_metric, ref_metric_inv, ref_curvature,
                     ref_weight)  # fmt: skip
 
@@ -71,8 +77,9 @@ def bilayer_reference_kernel(
     points_per_triangle: int,
     rest_metric: wp.array(dtype=Any),
     rest_curvature: wp.array(dtype=Any),
-    AC: Any,
-    bilayer_A: Any,
+    AC: wp.array(dtype=Any),
+    bilayer_A: wp.array(dtype=Any),
+    worlds: int,
     ref_metric: wp.array(dtype=Any),
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
@@ -80,11 +87,12 @@ def bilayer_reference_kernel(
 ):
     """ā = Λ² ā⁰ with Λ² = e^{-AC c}, b̄ = Λ b̄⁰ - A c ā⁰ (the supplement's bilayer; docs/theory/shell.md)."""
     q = wp.tid()
+    w = q // (rest_metric.shape[0] // worlds)
     t, row = basis_row(triangle_type, points_per_triangle, q)
     cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
-    stretch = wp.exp(-AC * cq)
+    stretch = wp.exp(-AC[w] * cq)
     a0 = rest_metric[q]
-    b_bar = wp.sqrt(stretch) * rest_curvature[q] - (bilayer_A * cq) * a0
+    b_bar = wp.sqrt(stretch) * rest_curvature[q] - (bilayer_A[w] * cq) * a0
     store_reference(q, stretch * a0, b_bar, weights[q % points_per_triangle], ref_metric, ref_metric_inv, ref_curvature,
                     ref_weight)  # fmt: skip
 
@@ -144,18 +152,20 @@ def koiter_energy_kernel(
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
     ref_weight: wp.array(dtype=Any),
-    stretching_modulus: Any,
-    bending_modulus: Any,
+    stretching_modulus: wp.array(dtype=Any),
+    bending_modulus: wp.array(dtype=Any),
     nu: Any,
+    worlds: int,
     energy_density: wp.array(dtype=wp.float64),
 ):
     """(E_S + E_B) density × dω̄ at every point (docs/theory/shell.md), in float64; differentiable (autodiff path)."""
     q = wp.tid()
+    w = q // (ref_weight.shape[0] // worlds)
     t, row = basis_row(triangle_type, points_per_triangle, q)
     membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
         x, patch_start, patch_vertices, basis, t, row, ref_metric_inv[q], ref_metric[q], ref_curvature[q]
     )
-    density = koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu)
+    density = koiter_density(membrane, bending, stretching_modulus[w], bending_modulus[w], nu)
     energy_density[q] = wp.float64(density * ref_weight[q])
 
 
@@ -231,13 +241,14 @@ def shell_forces_kernel(
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
     ref_weight: wp.array(dtype=Any),
-    stretching_modulus: Any,
-    bending_modulus: Any,
+    stretching_modulus: wp.array(dtype=Any),
+    bending_modulus: wp.array(dtype=Any),
     nu: Any,
+    worlds: int,
     weights: wp.array(dtype=Any),
     moments: wp.array(dtype=VolumeMoments),
-    target: wp.float64,
-    penalty: wp.float64,
+    target: wp.array(dtype=wp.float64),
+    penalty: wp.array(dtype=wp.float64),
     with_energy: int,
     energy_density: wp.array(dtype=wp.float64),
     forces: wp.array(dtype=Any),
@@ -250,15 +261,18 @@ def shell_forces_kernel(
     t = wp.tid()
     start = patch_start[t]
     size = patch_start[t + 1] - start
-    centroid = type(x[0])(moments_centroid(moments, x.shape[0]))
-    pressure = wp.float64(2.0) / wp.float64(3.0) * penalty * (volume_about_centroid(moments, x.shape[0]) - target)
+    w = t // (triangle_type.shape[0] // worlds)
+    vertices = x.shape[0] // worlds
+    centroid = type(x[0])(moments_centroid(moments[w], vertices))
+    pressure = volume_pressure(moments[w], vertices, target[w], penalty[w])
+    stretching, bending = stretching_modulus[w], bending_modulus[w]
     accumulated = wp.matrix(shape=(MAX_PATCH, 3), dtype=type(nu))  # one row per patch vertex
     for point in range(points_per_triangle):
         q = t * points_per_triangle + point
         row = triangle_type[t] * points_per_triangle + point
         g, g1, g2, g11, g12, g22 = point_gradient_jet(
             x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
-            stretching_modulus, bending_modulus, nu, weights[point], centroid, pressure, with_energy, energy_density,
+            stretching, bending, nu, weights[point], centroid, pressure, with_energy, energy_density,
         )  # fmt: skip
         for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
             if k < size:
@@ -284,13 +298,14 @@ def shell_force_jets_kernel(
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
     ref_weight: wp.array(dtype=Any),
-    stretching_modulus: Any,
-    bending_modulus: Any,
+    stretching_modulus: wp.array(dtype=Any),
+    bending_modulus: wp.array(dtype=Any),
     nu: Any,
+    worlds: int,
     weights: wp.array(dtype=Any),
     moments: wp.array(dtype=VolumeMoments),
-    target: wp.float64,
-    penalty: wp.float64,
+    target: wp.array(dtype=wp.float64),
+    penalty: wp.array(dtype=wp.float64),
     with_energy: int,
     energy_density: wp.array(dtype=wp.float64),
     jets: wp.array2d(dtype=Any),
@@ -298,13 +313,15 @@ def shell_force_jets_kernel(
     """As shell_forces_kernel, one thread per quadrature point, writing the point's gradient jet to
     `jets` for the deterministic `gather_forces_kernel` (no atomics)."""
     q = wp.tid()
+    w = q // (ref_weight.shape[0] // worlds)
+    vertices = x.shape[0] // worlds
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    centroid = type(x[0])(moments_centroid(moments, x.shape[0]))
-    pressure = wp.float64(2.0) / wp.float64(3.0) * penalty * (volume_about_centroid(moments, x.shape[0]) - target)
+    centroid = type(x[0])(moments_centroid(moments[w], vertices))
+    pressure = volume_pressure(moments[w], vertices, target[w], penalty[w])
     g, g1, g2, g11, g12, g22 = point_gradient_jet(
         x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
-        stretching_modulus, bending_modulus, nu, weights[q % points_per_triangle], centroid, pressure, with_energy,
-        energy_density,
+        stretching_modulus[w], bending_modulus[w], nu, weights[q % points_per_triangle], centroid, pressure,
+        with_energy, energy_density,
     )  # fmt: skip
     jets[q, 0] = g
     jets[q, 1] = g1
@@ -322,21 +339,26 @@ def sum_kernel(values: wp.array(dtype=Any), total: wp.array(dtype=Any)):
 
 
 @wp.func
-def moments_centroid(moments: wp.array(dtype=VolumeMoments), n_vertices: int):
-    m = moments[0]
+def moments_centroid(m: VolumeMoments, n_vertices: int):
+    """x̄ of one world's moments."""
     return wp.vec3d(m[4], m[5], m[6]) / wp.float64(n_vertices)
 
 
 @wp.func
-def moments_normal_sum(moments: wp.array(dtype=VolumeMoments)):
-    m = moments[0]
+def moments_normal_sum(m: VolumeMoments):
     return wp.vec3d(m[0], m[1], m[2])
 
 
 @wp.func
-def volume_about_centroid(moments: wp.array(dtype=VolumeMoments), n_vertices: int):
+def volume_about_centroid(m: VolumeMoments, n_vertices: int):
     """V = ⅓ ∫ (x - x̄)·n dω = V₀ - x̄·S: exactly translation invariant (docs/theory/shell.md)."""
-    return moments[0][3] - wp.dot(moments_centroid(moments, n_vertices), moments_normal_sum(moments))
+    return m[3] - wp.dot(moments_centroid(m, n_vertices), moments_normal_sum(m))
+
+
+@wp.func
+def volume_pressure(m: VolumeMoments, n_vertices: int, target: wp.float64, penalty: wp.float64):
+    """⅔ μV (V - V̄), the factor of the volume term's point jets."""
+    return wp.float64(2.0) / wp.float64(3.0) * penalty * (volume_about_centroid(m, n_vertices) - target)
 
 
 @wp.func
@@ -348,20 +370,25 @@ def volume_item(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
+    worlds: int,
+    w: int,
     i: int,
 ):
-    """Item i's share of the volume moments: quadrature point i's terms of S = ⅓ ∫ n dω and
-    V₀ = ⅓ ∫ x·n dω, and control point i's of Σx (float64)."""
+    """Item i of world w's share of the world's volume moments: its quadrature point i's terms of
+    S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω, and its control point i's of Σx (float64)."""
     area_normal = wp.vec3d()
     moment = wp.float64(0.0)
     xi = wp.vec3d()
-    if i < triangle_type.shape[0] * points_per_triangle:
-        t, row = basis_row(triangle_type, points_per_triangle, i)
+    points = triangle_type.shape[0] * points_per_triangle // worlds
+    vertices = x.shape[0] // worlds
+    if i < points:
+        q = w * points + i
+        t, row = basis_row(triangle_type, points_per_triangle, q)
         p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
-        area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[i % points_per_triangle]) / wp.float64(3.0))
+        area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
         moment = wp.dot(wp.vec3d(p), area_normal)
-    if i < x.shape[0]:
-        xi = wp.vec3d(x[i])
+    if i < vertices:
+        xi = wp.vec3d(x[w * vertices + i])
     return area_normal, moment, xi
 
 
@@ -376,9 +403,9 @@ def volume_terms_kernel(
     points_per_triangle: int,
     terms: wp.array(dtype=VolumeMoments),
 ):
-    """terms_i = item i's share of the volume moments (`volume_item`), for a differentiable sum."""
+    """terms_i = item i's share of the volume moments (`volume_item`; one world), for a differentiable sum."""
     i = wp.tid()
-    a, v, y = volume_item(x, patch_start, patch_vertices, triangle_type, basis, weights, points_per_triangle, i)
+    a, v, y = volume_item(x, patch_start, patch_vertices, triangle_type, basis, weights, points_per_triangle, 1, 0, i)
     terms[i] = VolumeMoments(a[0], a[1], a[2], v, y[0], y[1], y[2])
 
 
@@ -391,48 +418,55 @@ def volume_kernel(
     basis: wp.array2d(dtype=Any),
     weights: wp.array(dtype=Any),
     points_per_triangle: int,
+    worlds: int,
     items: int,
     threads: int,
     moments: wp.array(dtype=VolumeMoments),
 ):
-    """moments[0] += the volume moments [S, V₀, Σx] over max(points, vertices) `items`, thread t
-    taking items t, t + threads, ... (`volume_item`; docs/theory/shell.md; V = V₀ - x̄·S about the
-    control centroid, `volume_about_centroid`). Zeroed by the caller; launched on whole blocks, one
-    atomic per block."""
+    """moments[w] += world w's volume moments [S, V₀, Σx] over its max(points, vertices) `items`,
+    `threads` per world (whole blocks), thread t of world w taking items t, t + threads, ...
+    (`volume_item`; docs/theory/shell.md; V = V₀ - x̄·S about the control centroid,
+    `volume_about_centroid`). Zeroed by the caller; one atomic per block."""
+    w = wp.tid() // threads
     area_normal = wp.vec3d()
     moment = wp.float64(0.0)
     xi = wp.vec3d()
-    for i in range(wp.tid(), items, threads):
-        a, v, y = volume_item(x, patch_start, patch_vertices, triangle_type, basis, weights, points_per_triangle, i)
+    for i in range(wp.tid() - w * threads, items, threads):
+        a, v, y = volume_item(x, patch_start, patch_vertices, triangle_type, basis, weights, points_per_triangle,
+                              worlds, w, i)  # fmt: skip
         area_normal += a
         moment += v
         xi += y
-    block_add(moments, 0, VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2]))
+    block_add(moments, w, VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2]))
 
 
 @wp.func
-def volume_centroid_force(moments: wp.array(dtype=VolumeMoments), n_vertices: int, target: wp.float64,
-                          penalty: wp.float64):  # fmt: skip
-    """The x̄ part of -∂E_V/∂x_I, the same on every vertex: 2 μV (V - V̄) S / N."""
-    d = volume_about_centroid(moments, n_vertices) - target
-    return moments_normal_sum(moments) * (wp.float64(2.0) * penalty * d / wp.float64(n_vertices))
+def volume_centroid_force(moments: wp.array(dtype=VolumeMoments), target: wp.array(dtype=wp.float64),
+                          penalty: wp.array(dtype=wp.float64), vertices: int, i: int):  # fmt: skip
+    """The x̄ part of -∂E_V/∂x_I, the same on every vertex of I's world w: 2 μV (V - V̄) S / N."""
+    w = i // vertices
+    m = moments[w]
+    d = volume_about_centroid(m, vertices) - target[w]
+    return moments_normal_sum(m) * (wp.float64(2.0) * penalty[w] * d / wp.float64(vertices))
 
 
 @wp.kernel
 def volume_centroid_forces_kernel(
-    moments: wp.array(dtype=VolumeMoments), target: wp.float64, penalty: wp.float64, forces: wp.array(dtype=Any)
+    moments: wp.array(dtype=VolumeMoments), target: wp.array(dtype=wp.float64), penalty: wp.array(dtype=wp.float64),
+    worlds: int, forces: wp.array(dtype=Any),
 ):  # fmt: skip
     """forces = the x̄ part of -∂E_V/∂x (overwritten: it starts the atomic scatter's sum)."""
     i = wp.tid()
-    forces[i] = type(forces[i])(volume_centroid_force(moments, forces.shape[0], target, penalty))
+    forces[i] = type(forces[i])(volume_centroid_force(moments, target, penalty, forces.shape[0] // worlds, i))
 
 
 @wp.kernel
-def volume_energy_kernel(moments: wp.array(dtype=VolumeMoments), n_vertices: int, target: wp.float64,
-                         penalty: wp.float64, energy: wp.array(dtype=wp.float64)):  # fmt: skip
-    """E_V = μV (V - V̄)² added to energy[0] (single thread; global sums are float64)."""
-    d = volume_about_centroid(moments, n_vertices) - target
-    wp.atomic_add(energy, 0, penalty * d * d)
+def volume_energy_kernel(moments: wp.array(dtype=VolumeMoments), vertices: int, target: wp.array(dtype=wp.float64),
+                         penalty: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64)):  # fmt: skip
+    """E_V = μV (V - V̄)² of world w (one thread each; `vertices` per world) added to energy[0] (float64)."""
+    w = wp.tid()
+    d = volume_about_centroid(moments[w], vertices) - target[w]
+    wp.atomic_add(energy, 0, penalty[w] * d * d)
 
 
 @wp.kernel
@@ -446,8 +480,9 @@ def gather_forces_kernel(
     basis: wp.array2d(dtype=Any),
     points_per_triangle: int,
     moments: wp.array(dtype=VolumeMoments),
-    target: wp.float64,
-    penalty: wp.float64,
+    target: wp.array(dtype=wp.float64),
+    penalty: wp.array(dtype=wp.float64),
+    worlds: int,
     forces: wp.array(dtype=Any),
 ):
     """Deterministic forces (overwritten): vertex I gathers -Σ N_I,· · (g, g1, g2, g11, g12, g22) over the quadrature
@@ -455,8 +490,9 @@ def gather_forces_kernel(
     volume's x̄ part."""
     i = wp.tid()
     f = type(forces[i])()
-    if penalty > wp.float64(0.0):
-        f = type(forces[i])(volume_centroid_force(moments, forces.shape[0], target, penalty))
+    vertices = forces.shape[0] // worlds
+    if penalty[i // vertices] > wp.float64(0.0):
+        f = type(forces[i])(volume_centroid_force(moments, target, penalty, vertices, i))
     for e in range(vertex_entry_start[i], vertex_entry_start[i + 1]):
         for point in range(points_per_triangle):
             q, b = entry_point(vertex_entries[e], point, entry_triangle, patch_start, triangle_type, basis,
@@ -475,11 +511,11 @@ def negate_kernel(a: wp.array(dtype=Any), out: wp.array(dtype=Any)):
 
 _PATCH = dict(basis="vec6[,]")
 _REFERENCE = dict(ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]")
-_MODULI = dict(stretching_modulus="scalar", bending_modulus="scalar", nu="scalar")
+_MODULI = dict(stretching_modulus="scalar[]", bending_modulus="scalar[]", nu="scalar")
 declare_overloads(koiter_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]",
-                  rest_curvature="mat22[]", AC="scalar", AI="scalar", **_PATCH, **_REFERENCE)  # fmt: skip
+                  rest_curvature="mat22[]", AC="scalar[]", AI="scalar[]", **_PATCH, **_REFERENCE)  # fmt: skip
 declare_overloads(bilayer_reference_kernel, c="scalar[]", weights="scalar[]", rest_metric="mat22[]",
-                  rest_curvature="mat22[]", AC="scalar", bilayer_A="scalar", **_PATCH, **_REFERENCE)  # fmt: skip
+                  rest_curvature="mat22[]", AC="scalar[]", bilayer_A="scalar[]", **_PATCH, **_REFERENCE)  # fmt: skip
 declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
 declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
 declare_overloads(shell_force_jets_kernel, x="vec3[]", weights="scalar[]", jets="vec3[,]", **_PATCH, **_REFERENCE,

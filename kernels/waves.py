@@ -4,7 +4,7 @@ Telegraph `c_tt + α c_t = γ² Δ c` (leapfrog with centred damping), FitzHugh�
 `c_t = γ² Δ c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (explicit Euler, and IMEX Euler whose
 implicit diffusion is solved by the Jacobi-preconditioned conjugate gradients below).
 Here `acceleration` is the diffusion term's `M̃⁻¹ K c` (wavewarp/waves.py builds it), so the
-kernels below see only per-vertex numbers. One int32 flag per stepper, read once per chunk
+kernels below see only per-vertex numbers. One int32 flag per stepper and world, read once per chunk
 (docs/theory/scenes.md), says what failed: RUNAWAY (NaN/Inf or past the limit) or FLIP_FLOP (FHN's bounded
 period-2 oscillation past its time-step bound). The CG's dot products (kernels/laplace.py `dot_kernel`)
 sum interleaved strides per thread and add the partial sums atomically: no host round-trips,
@@ -108,10 +108,11 @@ def count_step_kernel(step: wp.array(dtype=wp.int32)):
 
 @wp.kernel
 def runaway_kernel(values: wp.array(dtype=Any), limit: Any, flag: wp.array(dtype=wp.int32)):
-    """flag = RUNAWAY where |value| > limit or value is NaN/Inf (NaN fails every comparison)."""
+    """flag[w] = RUNAWAY where |value| > limit or value is NaN/Inf in world w (one flag per world; NaN
+    fails every comparison)."""
     i = wp.tid()
     if not (wp.abs(values[i]) <= limit):
-        flag[0] = RUNAWAY
+        flag[i // (values.shape[0] // flag.shape[0])] = RUNAWAY
 
 
 @wp.kernel
@@ -122,7 +123,7 @@ def flip_kernel(
 ):  # fmt: skip
     """Period-2 flip-flop detector, after each step (docs/theory/scenes.md): d = c^{n+1} - c^n counts when it
     flips sign against d^n, |d| > floor (not round-off) and |d| >= hold |d^{n-1}| (not a decaying
-    transient); `steps` counts in a row set flag = FLIP_FLOP. Keeps c^{n+1}, d, d^n for the next step."""
+    transient); `steps` counts in a row set the world's flag = FLIP_FLOP. Keeps c^{n+1}, d, d^n for the next step."""
     i = wp.tid()
     ci = c[i]
     d = ci - previous[i]
@@ -130,7 +131,7 @@ def flip_kernel(
     flipped = d * last < type(d)(0.0) and wp.abs(d) > floor and wp.abs(d) >= hold * wp.abs(earlier[i])
     count = wp.where(flipped, streak[i] + 1, 0)
     if count >= steps:
-        flag[0] = FLIP_FLOP
+        flag[i // (c.shape[0] // flag.shape[0])] = FLIP_FLOP
     streak[i] = count
     previous[i] = ci
     earlier[i] = last

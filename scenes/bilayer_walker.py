@@ -1,6 +1,9 @@
 """Bilayer walker (supplement Movie 10): the sphere walker actuated through the bilayer model."""
 
-from wavewarp.walker import sphere_walker_run
+from functools import partial
+
+from wavewarp.batch import walker_batch
+from wavewarp.walker import sphere_walker_recipe, sphere_walker_run
 
 from wavewarp.scenes.sphere_walker import QUICK, Parameters  # noqa: F401 â€” the same sphere, coupling and chemistry
 
@@ -10,3 +13,9 @@ DESCRIPTION = "bilayer walker: the sphere walker with the bilayer shell model (Ä
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, bilayer=True, report=report)
+
+
+def build_batch(ps, *, seeds, device=None, report=print):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
+    recipe = partial(sphere_walker_recipe, bilayer=True)
+    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report)

@@ -4,7 +4,10 @@ from dataclasses import dataclass
 
 from wavewarp.mesh import cube
 from wavewarp.parameters import param
-from wavewarp.walker import WalkerParameters, box_walker_run
+from functools import partial
+
+from wavewarp.batch import walker_batch
+from wavewarp.walker import WalkerParameters, box_walker_recipe, box_walker_run
 
 NAME = "cube-walker"
 DESCRIPTION = "cube walker, edge 2R (R = 25), h = 0.084R: FHN waves from a top edge, AC = 0.2, μV = 6.4 Yh/L⁴ (Video 7)"
@@ -32,3 +35,10 @@ QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}  # --quick: a smoke test a
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     return box_walker_run(NAME, p, cube, ORIGINS, radius=p.edge / L_OVER_R, mesh=mesh, device=device, seed=seed,
                           report=report)  # fmt: skip
+
+
+def build_batch(ps, *, seeds, device=None, report=print):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
+    p = ps[0]
+    recipe = partial(box_walker_recipe, make_box=cube, origins=ORIGINS, radius=p.edge / L_OVER_R)
+    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report)

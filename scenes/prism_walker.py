@@ -5,7 +5,10 @@ from dataclasses import dataclass
 
 from wavewarp.mesh import prism
 from wavewarp.parameters import param
-from wavewarp.walker import WalkerParameters, box_walker_run
+from functools import partial
+
+from wavewarp.batch import walker_batch
+from wavewarp.walker import WalkerParameters, box_walker_recipe, box_walker_run
 
 NAME = "prism-walker"
 DESCRIPTION = "prism walker, all edges 2.3R (R = 25), h = 0.084R: FHN waves from a vertex, AC = 0.2, μV = 11.1 Yh/L⁴ (Fig. 3a)"
@@ -33,3 +36,10 @@ QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}  # --quick: a smoke test a
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     return box_walker_run(NAME, p, prism, ORIGINS, seed=seed, radius=p.edge / L_OVER_R, axis_to_x=True, mesh=mesh,
                           device=device, report=report)  # fmt: skip
+
+
+def build_batch(ps, *, seeds, device=None, report=print):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
+    p = ps[0]
+    recipe = partial(box_walker_recipe, make_box=prism, origins=ORIGINS, radius=p.edge / L_OVER_R, axis_to_x=True)
+    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report)

@@ -3,7 +3,8 @@
 from dataclasses import dataclass
 
 from wavewarp.parameters import param
-from wavewarp.walker import WalkerParameters, sphere_walker_run
+from wavewarp.batch import walker_batch
+from wavewarp.walker import WalkerParameters, sphere_walker_recipe, sphere_walker_run
 
 NAME = "sphere-walker"
 DESCRIPTION = "sphere walker, R = 25, h = 0.084R: FHN waves from the equator, AC = 0.1, μV = 0.4 Yh/R⁴, on the ground (Fig. 3a)"
@@ -22,3 +23,8 @@ QUICK = {"level": 2, "periods": 2.2, "frames": 4}  # --quick: a smoke test at le
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, report=report)
+
+
+def build_batch(ps, *, seeds, device=None, report=print):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
+    return walker_batch(NAME, sphere_walker_recipe, ps, seeds=seeds, device=device, report=report)

@@ -65,8 +65,9 @@ def test_one_block_rigid_sums_equal_the_many_block_ones_and_numpy(device, rng):
     for threads in (reduction_threads(n, deterministic=False), reduction_threads(n, deterministic=True)):
         arrays = [wp.array(a, dtype=wp.vec3d, device=device) for a in (forces, x, velocities)]
         sums, second, out = (wp.zeros(k, dtype=t, device=device) for k, t in ((5, wp.vec3d), (1, wp.mat33d), (5, wp.vec3d)))
-        eval_rigid_correction(arrays[0], wp.array(mass, dtype=wp.float64, device=device), arrays[1], arrays[2], True,
-                              threads, 1.0 / mass.sum(), sums, second, out)  # fmt: skip
+        inverse_total = wp.array([1.0 / mass.sum()], dtype=wp.float64, device=device)
+        eval_rigid_correction(arrays[0], wp.array(mass, dtype=wp.float64, device=device), arrays[1], arrays[2], True, 1,
+                              threads, inverse_total, sums, second, out)  # fmt: skip
         rigid.append(out.numpy())
     np.testing.assert_allclose(rigid[1], rigid[0], rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(rigid[1][0], forces.sum(axis=0) / mass.sum(), rtol=1e-12)

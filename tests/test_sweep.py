@@ -67,6 +67,36 @@ def test_batches_deal_the_grid_round_robin():
         batches(points, 0)
 
 
+def test_batches_keep_points_of_one_group_together():
+    """With a group key, a batch holds points of one group only, each group dealt round-robin."""
+    dealt = batches(list(range(10)), 3, group=lambda p: p % 2)
+    assert sorted(p for batch in dealt for p in batch) == list(range(10))
+    assert all(len({p % 2 for p in batch}) == 1 and len(batch) <= 3 for batch in dealt) and len(dealt) == 4
+
+
+def test_a_walker_sweep_runs_each_batch_as_one_batched_run(tmp_path):
+    """sphere-walker over AC (a per-world parameter) and sensitive (shared) in batches of 2: each batch
+    is one batched run of the points of one `sensitive` (the two AC values its worlds), each point with
+    its own result and parameters (a world equals its single run: tests/test_batch.py)."""
+    fixed = ("level=1", "periods=0.1", "frames=1", "settle=1", "dtype=float64")
+    spec = SweepSpec("sphere-walker", grid={"AC": ["0.1", "0.2"], "sensitive": ["true", "false"]}, fixed=fixed,
+                     device="cpu")  # fmt: skip
+    pool = CountingExecutor()
+    rows = sweep(spec, str(tmp_path), executor=pool, batch=2)
+    assert [row["status"] for row in rows] == ["done"] * 4 and pool.points == 4
+    results = {}
+    for point in grid_points(spec):
+        with open(tmp_path / "points" / f"{point.name}.json") as f:
+            results[point.name] = json.load(f)
+    for name, result in results.items():
+        assert result["batch"]["worlds"] == 2
+        assert result["parameters"]["AC"] == float(result["values"]["AC"])
+    assert {r["values"]["sensitive"] for r in results.values() if r["batch"]["world"] == 0} == {"true", "false"}
+    with pytest.raises(ValueError, match="use --batch 1 with --h5"):
+        sweep(SweepSpec("sphere-walker", grid={"AC": ["0.1", "0.2"]}, h5=True), str(tmp_path / "h5"), batch=2,
+              executor=CountingExecutor())  # fmt: skip
+
+
 def test_bad_points_are_refused_before_anything_runs(tmp_path):
     with pytest.raises(SceneError, match="unknown parameter 'bogus' in --grid"):
         sweep(SweepSpec("cube-waves", grid={"bogus": ["1"]}), str(tmp_path), executor=CountingExecutor())

@@ -21,37 +21,44 @@ class ChemicalBalance:
     """`total_concentration_error`: the largest |C − C_expected| / max(|C_expected|, ∫|c| dω) over the
     recorded frames (relative to the chemical present); `min_concentration`: the field's smallest value
     at the limit points of the control vertices over them (the control values themselves swing wider:
-    the basis smooths them), and its time. `sensitive=False` measures C on the rest surface (the twin's wave never moves)."""
+    the basis smooths them), and its time. `sensitive=False` measures C on the rest surface (the twin's wave never moves).
+    On batched worlds (`Mesh.union`) each world is measured apart: `expected_total` one per world."""
 
     def __init__(self, mesh, *, sensitive: bool, rule: str = "3", device=None, dtype="float32"):
         self._meter = LaplaceBeltrami(mesh, rule=rule, assembled=False, device=device, dtype=dtype)
         self.rest_mass = self._meter.mass()
         self.sensitive = bool(sensitive)
-        self.error = 0.0
-        self.min_concentration, self.min_time = np.inf, None
-        self.min_area_ratio = np.inf
+        self.worlds = mesh.worlds
+        self.error = np.zeros(self.worlds)
+        self.min_concentration, self.min_time = np.full(self.worlds, np.inf), [None] * self.worlds
+        self.min_area_ratio = np.full(self.worlds, np.inf)
 
-    def record(self, time: float, positions, concentration, expected_total: float) -> None:
+    def record(self, time: float, positions, concentration, expected_total) -> None:
         c = np.asarray(concentration, dtype=np.float64)
         self._meter.update(np.asarray(positions, dtype=np.float64))
         shell_mass = self._meter.mass()
-        self.min_area_ratio = min(self.min_area_ratio, float(np.min(shell_mass / self.rest_mass)))
         mass = shell_mass if self.sensitive else self.rest_mass  # the surface the wave runs on
-        scale = max(abs(expected_total), float(mass @ np.abs(c)), np.finfo(float).tiny)
-        self.error = max(self.error, abs(float(mass @ c) - expected_total) / scale)
         field = self._meter.field_values(c)
-        if field.min() < self.min_concentration:
-            self.min_concentration, self.min_time = float(field.min()), float(time)
+        expected = np.broadcast_to(np.asarray(expected_total, dtype=np.float64), (self.worlds,))
+        n = len(c) // self.worlds
+        for w in range(self.worlds):
+            world = slice(w * n, (w + 1) * n)
+            ratio = float(np.min(shell_mass[world] / self.rest_mass[world]))
+            self.min_area_ratio[w] = min(self.min_area_ratio[w], ratio)
+            scale = max(abs(expected[w]), float(mass[world] @ np.abs(c[world])), np.finfo(float).tiny)
+            self.error[w] = max(self.error[w], abs(float(mass[world] @ c[world]) - expected[w]) / scale)
+            if field[world].min() < self.min_concentration[w]:
+                self.min_concentration[w], self.min_time[w] = float(field[world].min()), float(time)
 
-    def measurements(self) -> dict:
-        """Also `min_area_ratio`, the smallest M_I(x) / M_I(rest) over the frames: where the shell
-        contracted most (conserving the chemical, a quasi-static shell loses its equilibrium near
-        1/e: docs/theory/transport.md)."""
-        recorded = self.min_time is not None
-        return {"total_concentration_error": self.error if recorded else None,
-                "min_concentration": self.min_concentration if recorded else None,
-                "min_concentration_time": self.min_time,
-                "min_area_ratio": self.min_area_ratio if recorded else None}  # fmt: skip
+    def measurements(self, world: int = 0) -> dict:
+        """World `world`'s; also `min_area_ratio`, the smallest M_I(x) / M_I(rest) over the frames: where
+        the shell contracted most (conserving the chemical, a quasi-static shell loses its equilibrium
+        near 1/e: docs/theory/transport.md)."""
+        recorded = self.min_time[world] is not None
+        return {"total_concentration_error": float(self.error[world]) if recorded else None,
+                "min_concentration": float(self.min_concentration[world]) if recorded else None,
+                "min_concentration_time": self.min_time[world],
+                "min_area_ratio": float(self.min_area_ratio[world]) if recorded else None}  # fmt: skip
 
 
 class FirstArrival:

@@ -66,7 +66,7 @@ class ChemistrySolver(ABC):
         self.largest_eigenvalue, self._stable_dt, self._bound_version = None, None, None
         n = operator.n_vertices
         with wp.ScopedDevice(self.device):
-            self.flag = wp.zeros(1, dtype=wp.int32)
+            self.flag = wp.zeros(operator.mesh.worlds, dtype=wp.int32)  # one per world
             self._stiffness_c = wp.empty(n, dtype=self.scalar)
             self.acceleration = wp.empty(n, dtype=self.scalar)
             self._old_mass = wp.empty(n, dtype=self.scalar)
@@ -96,9 +96,15 @@ class ChemistrySolver(ABC):
         self.flag.zero_()
 
     # ---------------------------------------------------------------- the surface and its bound
-    def stable_dt(self) -> float:
+    def stable_dt(self, last_if_broken: bool = False) -> float:
         """The method's stability bound on the operator's current surface (see `bound_formula`): λ_max(M̃⁻¹K)
-        by power iteration on the device, estimated again whenever the surface moved."""
+        by power iteration on the device, estimated again whenever the surface moved. `last_if_broken`:
+        the last bound where the surface went non-finite (a blow-up's message)."""
+        if last_if_broken and self._stable_dt is not None:
+            try:
+                return self.stable_dt()
+            except RuntimeError:
+                return self._stable_dt
         if self._bound_version != self.operator.version:
             self.largest_eigenvalue = self.operator.largest_eigenvalue(self.mass_corrections)
             self._stable_dt = self._bound(self.largest_eigenvalue)

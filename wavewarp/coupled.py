@@ -165,6 +165,11 @@ class Walking:
     values of c, w, v: BlowUpError; the wave's period-2 flip-flop: OscillationError; state restored
     to the chunk's start); sensitive runs then re-check the wave's stability bound on the moved
     surface (TimeStepError, state restored, if the fixed dt now exceeds it).
+
+    Batched worlds (`Mesh.union`): a world whose flags are up is put back to the chunk's start and
+    stopped there (`stopped`: world -> its error; it stays frozen while the others go on); the run
+    raises only when every world has stopped, or for a failure that belongs to no one world (the moved
+    surface's time-step bound).
     """
 
     def __init__(self, dynamics: ShellDynamics, wave: _Stepper, *, sensitive: bool = True, check_every: int = 20,
@@ -189,6 +194,8 @@ class Walking:
                                     modules=modules, capture=dynamics.capture and wave.capture,
                                     check_every=check_every)  # fmt: skip
         self.shell.listen(self.notify_model_changed)
+        self.stopped = {}  # batched worlds: world -> the error that stopped it
+        self._frozen = {}  # world -> its protected arrays' share when it stopped
 
     time = property(lambda self: self.wave.time)
     check_every = property(lambda self: self.runner.check_every)
@@ -229,6 +236,8 @@ class Walking:
                                    f" coupled to the {dynamics.scheme}")  # fmt: skip
         if failure is None:
             failure = dynamics.runaway(dynamics.time, chunk * wave.dt)
+        if failure is not None and self.shell.worlds > 1:
+            failure = self._stop_worlds(failure)
         if failure is None and self.sensitive:
             self.operator.moved_on_device()  # a graph replay moved the surface without a new `version`
             try:
@@ -236,6 +245,23 @@ class Walking:
             except TimeStepError as error:
                 failure = error
         return failure
+
+    def _stop_worlds(self, failure):
+        """Batched worlds: stop (freeze at the chunk's start) every world whose flags are up; `failure`
+        (the first world's error, its message naming the batch) is raised only once every world stopped."""
+        worlds, dynamics = self.shell.worlds, self.dynamics
+        dynamics.solver.launch_checks(dynamics.state, dynamics.speed_limit)  # its flags this chunk, too
+        up = self.wave.solver.flag.numpy() | dynamics.solver.flag.numpy()
+        for w in np.flatnonzero(up):
+            if int(w) not in self.stopped:
+                self.stopped[int(w)] = failure
+                self._frozen[int(w)] = self.runner.world_backup(int(w), worlds)
+        if len(self.stopped) == worlds:
+            return failure
+        for w, copies in self._frozen.items():
+            self.runner.put_world(copies, w, worlds)
+        self._restore()
+        return None
 
     def _restore(self) -> None:
         self.shell.update_reference(self.wave.c)

@@ -50,7 +50,7 @@ from .kernels.dynamics import (
 )
 from .laplace import LaplaceBeltrami
 from .runner import GuardedRunner, Stepper
-from .shell import Shell
+from .shell import Shell, world_value
 from .state import State
 from .waves import BlowUpError, TimeStepError
 
@@ -105,20 +105,22 @@ class InertialSolver:
         if self.gravity < 0 or self.damping < 0:
             raise ValueError(f"gravity and damping must be >= 0, got gravity={plain(gravity)!r}, damping={plain(damping)!r}")
         mesh = shell.mesh
-        n = mesh.n_vertices
-        self._reduction_threads = reduction_threads(n, shell.deterministic)
+        n, self.worlds = mesh.n_vertices, mesh.worlds
+        self._reduction_threads = reduction_threads(mesh.vertices_per_world, shell.deterministic)  # per world
         rest = LaplaceBeltrami(mesh, rule=shell.rule, device=self.device, dtype="float64")
         self.mass = self.density * rest.mass()  # ρ ∫ N_I dω̄⁰ on the rest surface
-        self.total_mass = float(self.mass.sum())
+        self.world_masses = np.array([world.sum() for world in self.mass.reshape(self.worlds, -1)])
+        self.total_mass = world_value(self.world_masses)
         self.mask = LimitMask.of(mesh, device=self.device, dtype=self.scalar.__name__)
         with wp.ScopedDevice(self.device):
             self._mass = wp.array(self.mass.astype(self._real), dtype=self.scalar)
             self._inverse_mass = wp.array((1.0 / self.mass).astype(self._real), dtype=self.scalar)
+            self._inverse_total_mass = wp.array((1.0 / self.world_masses).astype(self._real), dtype=self.scalar)
             self._forces = wp.zeros(n, dtype=self.vec3)
-            self._rigid_sums = wp.zeros(5, dtype=self.vec3)  # zeroed by their consumer, rigid_correction_kernel
-            self._second_moment = wp.zeros(1, dtype=wp.types.matrix((3, 3), self.scalar))
-            self._rigid = wp.zeros(5, dtype=self.vec3)
-            self._first_moment = wp.zeros(1, dtype=self.vec3)
+            self._rigid_sums = wp.zeros(5 * self.worlds, dtype=self.vec3)  # zeroed by their consumer, rigid_correction_kernel
+            self._second_moment = wp.zeros(self.worlds, dtype=wp.types.matrix((3, 3), self.scalar))
+            self._rigid = wp.zeros(5 * self.worlds, dtype=self.vec3)
+            self._first_moment = wp.zeros(self.worlds, dtype=self.vec3)
             # the ground's points: limit points of the control vertices, or quadrature points (area contact)
             points = n if ground is None or ground.contact == "point" else shell.tables.n_quadrature_points
             self._limit_x = wp.zeros(points, dtype=self.vec3)
@@ -127,7 +129,7 @@ class InertialSolver:
             self._normal_force = wp.zeros(points, dtype=self.scalar)
             # dω̄⁰ at each quadrature point (area contact)
             self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"] if points != n else None
-            self.flag = wp.zeros(1, dtype=wp.int32)
+            self.flag = wp.zeros(self.worlds, dtype=wp.int32)  # per world
         self.contact_damping = self._contact_damping()
 
     def state(self, x0=None, v0=None) -> State:
@@ -205,23 +207,25 @@ class InertialSolver:
         x, v = state_out.x, state_out.v
         with wp.ScopedDevice(self.device):
             self.shell.forces_device(x, self._forces)
-            eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self._reduction_threads,
-                                  1.0 / self.total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+            eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self.worlds, self._reduction_threads,
+                                  self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
             self.contact_forces(x, v)
             self._integrate(x, v, dt)
 
     def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
-        integrate_symplectic_euler(self._forces, self._inverse_mass, self._rigid, self.damping, self.gravity, dt, x, v)
+        integrate_symplectic_euler(self._forces, self._inverse_mass, self._rigid, self.damping, self.gravity, dt,
+                                   self.worlds, x, v)  # fmt: skip
 
     def launch_checks(self, state: State, limit: float) -> None:
-        """flag = 1 where some |v_I| passed `limit` or is NaN/Inf (read by the caller)."""
+        """flag[w] = 1 where some |v_I| of world w passed `limit` or is NaN/Inf (read by the caller)."""
         self.flag.zero_()
-        eval_speed_runaway(state.v, limit, self.flag)
+        eval_speed_runaway(state.v, limit, self.worlds, self.flag)
 
     # ---------------------------------------------------------------- measurements
-    def launch_trace_row(self, state: State, c: wp.array, origin: int, row: wp.array, trace: wp.array) -> None:
-        """Device only (capturable): trace[row] = [c_origin, centre of mass, x_origin], row += 1."""
-        eval_trace_row(self._mass, state.x, c, origin, self._reduction_threads, 1.0 / self.total_mass,
+    def launch_trace_row(self, state: State, c: wp.array, origin: wp.array, row: wp.array, trace: wp.array) -> None:
+        """Device only (capturable): per world w, trace[row[w], 7w..7w+6] = [c at origin[w], centre of mass,
+        x at origin[w]], row[w] += 1."""
+        eval_trace_row(self._mass, state.x, c, origin, self.worlds, self._reduction_threads, self._inverse_total_mass,
                        self._first_moment, row, trace)  # fmt: skip
 
     def external_forces(self, state: State) -> np.ndarray:
@@ -289,7 +293,8 @@ class OverdampedSolver(InertialSolver):
         return f"dt < 2ζ/ω², ζ = {self.drag:.6g}"
 
     def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
-        integrate_overdamped_euler(self._forces, self._inverse_mass, self._rigid, 1.0 / self.drag, self.gravity, dt, x, v)
+        integrate_overdamped_euler(self._forces, self._inverse_mass, self._rigid, 1.0 / self.drag, self.gravity, dt,
+                                   self.worlds, x, v)  # fmt: skip
 
 
 class ShellDynamics(Stepper):
@@ -330,6 +335,7 @@ class ShellDynamics(Stepper):
     v = property(lambda self: self.state.v)
     mass = property(lambda self: self.solver.mass)
     total_mass = property(lambda self: self.solver.total_mass)
+    world_masses = property(lambda self: self.solver.world_masses)
     density = property(lambda self: self.solver.density)
     gravity = property(lambda self: self.solver.gravity)
     damping = property(lambda self: self.solver.damping)
@@ -372,7 +378,7 @@ class ShellDynamics(Stepper):
         """Read one flag: a BlowUpError (not raised) if some |v_I| passed `speed_limit` or is NaN/Inf,
         for the steps from `time` over `duration`; None when all is well."""
         self.solver.launch_checks(self.state, self.speed_limit)
-        if not self.solver.flag.numpy()[0]:
+        if not self.solver.flag.numpy().any():
             return None
         return BlowUpError(
             f"{self.scheme} blew up between t = {time:.6g} and t = {time + duration:.6g} (NaN/Inf or a speed past "

@@ -51,8 +51,48 @@ class Mesh:
         self.triangles = triangles.astype(np.int32)
         self.triangles.setflags(write=False)
 
+    worlds = 1  # a `union` holds several
+
+    @classmethod
+    def union(cls, meshes) -> Mesh:
+        """Batched worlds: the disjoint union of meshes of one topology (the same triangles; their
+        vertices may differ), world w's vertices and triangles the w-th contiguous block. Each mesh was
+        validated; the union is a Mesh with `worlds` components that never interact."""
+        meshes = list(meshes)
+        if not meshes or not all(isinstance(m, Mesh) and m.worlds == 1 for m in meshes):
+            raise ValueError("Mesh.union takes a non-empty list of single-world wavewarp Meshes")
+        first = meshes[0]
+        for w, m in enumerate(meshes[1:], 1):
+            if not np.array_equal(m.triangles, first.triangles):
+                raise ValueError(f"batched worlds need one topology: world {w}'s triangles differ from world 0's "
+                                 "(build every world from the same mesh, e.g. the same level or divisions)")  # fmt: skip
+        union = cls.__new__(cls)
+        vertices = np.concatenate([m.vertices for m in meshes])
+        offsets = (np.arange(len(meshes)) * first.n_vertices).astype(np.int32)
+        triangles = (first.triangles[None] + offsets[:, None, None]).reshape(-1, 3)
+        vertices.setflags(write=False)
+        triangles.setflags(write=False)
+        union.vertices, union.triangles, union.worlds = vertices, triangles, len(meshes)
+        return union
+
+    @property
+    def vertices_per_world(self) -> int:
+        return self.n_vertices // self.worlds
+
+    @property
+    def triangles_per_world(self) -> int:
+        return self.n_triangles // self.worlds
+
+    def world(self, w: int) -> Mesh:
+        """World w of a union (itself for a single world)."""
+        if self.worlds == 1:
+            return self
+        nv, nt = self.vertices_per_world, self.triangles_per_world
+        return Mesh(self.vertices[w * nv:(w + 1) * nv], self.triangles[w * nt:(w + 1) * nt] - w * nv)
+
     def __repr__(self) -> str:
-        return f"Mesh({self.n_vertices} vertices, {self.n_triangles} triangles)"
+        worlds = f", {self.worlds} worlds" if self.worlds > 1 else ""
+        return f"Mesh({self.n_vertices} vertices, {self.n_triangles} triangles{worlds})"
 
     @property
     def n_vertices(self) -> int:

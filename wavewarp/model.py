@@ -20,13 +20,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .checks import positive
+import numpy as np
+
+from .checks import plain, positive
 from .chemistry import FitzHughNagumoSolver, TelegraphSolver
 from .dynamics import Ground, InertialSolver, OverdampedDynamics, OverdampedSolver, ShellDynamics
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh
 from .self_contact import SelfContact
-from .shell import Shell
+from .shell import Shell, per_world
 from .waves import FitzHughNagumo, Telegraph
 
 
@@ -128,9 +130,14 @@ class ModelBuilder:
         return self
 
     def add_volume(self, penalty):
-        """The volume constraint μV (V - V̄)², V̄ the rest volume."""
+        """The volume constraint μV (V - V̄)², V̄ the rest volume (batched worlds: one μV ≥ 0 per world, or one)."""
         self._add("volume")
-        self._volume = positive("penalty", penalty)
+        if np.ndim(penalty) == 0:
+            self._volume = positive("penalty", penalty)
+        else:
+            self._volume = per_world("penalty", penalty, self.mesh.worlds)
+            if np.any(self._volume < 0) or not np.any(self._volume > 0):
+                raise ValueError(f"penalty must be >= 0 in every world and > 0 in one, got {plain(penalty)!r}")
         return self
 
     def add_self_contact(self, **options):
@@ -185,7 +192,7 @@ class ModelBuilder:
                           rule=self.rule, device=self.device, dtype=self.dtype, **options)  # fmt: skip
             if self._self_contact is not None:
                 shell.self_contact = SelfContact(shell, **self._self_contact)
-        elif self._volume or self._self_contact is not None:
+        elif np.any(self._volume) or self._self_contact is not None:
             raise ValueError("volume and self-contact terms act on a shell: add_koiter or add_bilayer first")
         g, density = self._gravity
         return Model(self.mesh, self.device, self.dtype, self.rule, tuple(self._terms), shell, self._chemistry,

@@ -232,6 +232,10 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
     ROUND_OFF_SLACK × tol away (nearer is the dtype's floor: it raises), not with self-contact.
     """
     checked_method(method)
+    if shell.worlds > 1:
+        raise ValueError(f"quasi-static relaxation steps one world: this shell holds {shell.worlds} batched worlds, "
+                         "whose line search and convergence would be shared; relax each world's own Shell "
+                         "(batched worlds run the walkers' dynamics)")  # fmt: skip
     if method == "newton":
         return _newton(shell, x.numpy().astype(np.float64), tol, newton_steps, callback, out, [], 0)
     try:

@@ -33,6 +33,21 @@ class GuardedRunner:
         self._graphs = {}
         self._backups = None
 
+    def world_backup(self, world: int, worlds: int) -> list:
+        """Copies of world `world`'s share (of `worlds` equal blocks) of the last chunk's backups."""
+        copies = []
+        for backup in self._backups:
+            n = len(backup) // worlds
+            copy = wp.empty(n, dtype=backup.dtype, device=backup.device)
+            wp.copy(copy, backup, src_offset=world * n, count=n)
+            copies.append(copy)
+        return copies
+
+    def put_world(self, copies: list, world: int, worlds: int) -> None:
+        """Write `world_backup` copies back into world `world`'s share of the protected arrays."""
+        for array, copy in zip(self.protected(), copies):
+            wp.copy(array, copy, dest_offset=world * (len(array) // worlds), count=len(copy))
+
     def invalidate(self) -> None:
         """Drop the captured graphs: they hold the launch arguments (dt, arrays, terms) they were captured with."""
         self._graphs.clear()

@@ -47,6 +47,8 @@ class SelfContact:
         self.shell = shell
         if shell.gradient == "autodiff":
             raise ValueError("self-contact needs the analytic gradient: build the Shell with gradient='analytic'")
+        if shell.worlds > 1:
+            raise ValueError("self-contact acts within one shell: batched worlds (a Mesh.union) would touch each other")
         self.distance = positive("distance", shell.thickness if distance is None else distance)
         bending = shell.young * shell.thickness**3 / (12 * (1 - shell.poisson**2))
         self.pressure = positive("pressure", bending / self.distance**3 if pressure is None else pressure)

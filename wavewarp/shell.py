@@ -47,37 +47,44 @@ MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
 
 
+def per_world(name: str, value, worlds: int, check=finite) -> np.ndarray:
+    """A parameter of batched worlds: one value for every world or one per world, each `check`ed."""
+    values = np.atleast_1d(np.asarray(value, dtype=object))
+    if values.ndim != 1 or len(values) not in (1, worlds):
+        raise ValueError(f"{name} must be one number or a list of {worlds} (one per world), got {plain(value)!r}")
+    return np.array([check(name, v) for v in np.broadcast_to(values, (worlds,))], dtype=np.float64)
+
+
+def world_value(values: np.ndarray):
+    """A per-world parameter as users read it: a float where every world shares it, else the array."""
+    return float(values[0]) if np.all(values == values[0]) else values.copy()
+
+
 class KoiterReference:
-    """The active reference of paper Eq. 2: ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰."""
+    """The active reference of paper Eq. 2: ā = e^{-AC c} ā⁰, b̄ = (1 - AI c) b̄⁰; `couplings` the
+    device arrays of AC and AI, one per world."""
 
     name = "koiter"
+    kernel = koiter_reference_kernel
 
-    def __init__(self, AC: float, AI: float):
-        self.AC, self.AI = AC, AI
+    def __init__(self, couplings: list):
+        self.couplings = couplings
 
     def launch(self, shell, c: wp.array) -> None:
         """Fill the shell's reference arrays at every quadrature point from control values c."""
-        s = shell.scalar
-        wp.launch(koiter_reference_kernel, dim=shell.tables.n_quadrature_points,
-                  inputs=[c, *shell.tables.weighted_patch(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.AI)],
+        wp.launch(self.kernel, dim=shell.tables.n_quadrature_points,
+                  inputs=[c, *shell.tables.weighted_patch(), shell.rest_metric, shell.rest_curvature, *self.couplings,
+                          shell.worlds],
                   outputs=shell.reference_arrays(), device=shell.device)  # fmt: skip
 
 
-class BilayerReference:
+class BilayerReference(KoiterReference):
     """The supplement's bilayer: ā = Λ² ā⁰ with Λ² = e^{-AC c}, b̄ = Λ b̄⁰ - A c ā⁰, A = (AC/2 - AI)/R
-    (R: `radius`, the sphere's), so AI > 0 bends a sphere as the Koiter reference does."""
+    (R the sphere's radius), so AI > 0 bends a sphere as the Koiter reference does; `couplings` the
+    device arrays of AC and A, one per world."""
 
     name = "bilayer"
-
-    def __init__(self, AC: float, AI: float, radius: float):
-        self.AC, self.AI, self.radius = AC, AI, radius
-        self.A = (AC / 2 - AI) / radius
-
-    def launch(self, shell, c: wp.array) -> None:
-        s = shell.scalar
-        wp.launch(bilayer_reference_kernel, dim=shell.tables.n_quadrature_points,
-                  inputs=[c, *shell.tables.weighted_patch(), shell.rest_metric, shell.rest_curvature, s(self.AC), s(self.A)],
-                  outputs=shell.reference_arrays(), device=shell.device)  # fmt: skip
+    kernel = bilayer_reference_kernel
 
 
 class Shell:
@@ -88,6 +95,9 @@ class Shell:
     A = (AC/2 - AI)/R, default the radius of the sphere with the rest area); rule the quadrature;
     gradient "analytic" or "autodiff"; deterministic=True sums forces in a fixed order (None: as
     `wavewarp.device.set_deterministic` chose).
+
+    Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
+    take one value per world (or one for all); ν is shared. Worlds never interact.
     """
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
@@ -96,19 +106,25 @@ class Shell:
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
-        self.thickness = positive("thickness", thickness)
-        self.young = positive("young", young)
+        worlds = mesh.worlds
+        self._thickness = per_world("thickness", thickness, worlds, positive)
+        self._young = per_world("young", young, worlds, positive)
         self.poisson = finite("poisson", poisson)
         if not -1.0 < self.poisson < 0.5:
             raise ValueError(f"poisson must lie in (-1, 0.5), got {plain(poisson)!r}")
-        self.AC, self.AI = finite("AC", AC), finite("AI", AI)
-        self.volume_penalty = finite("volume_penalty", volume_penalty)
-        if self.volume_penalty < 0:
+        self._AC, self._AI = per_world("AC", AC, worlds), per_world("AI", AI, worlds)
+        self._volume_penalty = per_world("volume_penalty", volume_penalty, worlds)
+        if np.any(self._volume_penalty < 0):
             raise ValueError(f"volume_penalty must be >= 0, got {plain(volume_penalty)!r}")
         if model not in MODELS:
             raise ValueError(f"model must be one of {', '.join(MODELS)}, got {model!r}")
         if gradient not in GRADIENTS:
             raise ValueError(f"gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+        if worlds > 1 and gradient != "analytic":
+            raise ValueError("batched worlds take gradient='analytic' (the autodiff path sums one world)")
+        self.thickness, self.young = world_value(self._thickness), world_value(self._young)
+        self.AC, self.AI = world_value(self._AC), world_value(self._AI)
+        self.volume_penalty = world_value(self._volume_penalty)
         self.model, self.gradient, self.deterministic = model, gradient, deterministic_default(deterministic)
 
         self.rule = str(rule)
@@ -122,25 +138,27 @@ class Shell:
         n_q = self.tables.n_quadrature_points
         rest = evaluate(self.tables, self.tables.positions())
         self.rest_metric, self.rest_curvature = rest["metric"], rest["curvature"]
-        self.rest_area = float(rest["area"].numpy().astype(np.float64).sum())
+        areas = rest["area"].numpy().astype(np.float64).reshape(worlds, -1).sum(axis=1)
+        self.rest_area = world_value(areas)
         if bilayer_radius is None:
-            bilayer_radius = math.sqrt(self.rest_area / (4 * math.pi))
-        self.bilayer_radius = positive("bilayer_radius", bilayer_radius)
-        self.reference = (KoiterReference(self.AC, self.AI) if model == "koiter" else
-                          BilayerReference(self.AC, self.AI, self.bilayer_radius))  # fmt: skip
+            bilayer_radius = np.sqrt(areas / (4 * math.pi))
+        self._bilayer_radius = per_world("bilayer_radius", bilayer_radius, worlds, positive)
+        self.bilayer_radius = world_value(self._bilayer_radius)
+        self.reference = (KoiterReference(self.world_arrays(self._AC, self._AI)) if model == "koiter" else
+                          BilayerReference(self.world_arrays(self._AC, (self._AC / 2 - self._AI) / self._bilayer_radius)))
         nu = self.poisson
-        self._moduli = (
-            self.young * self.thickness / (8 * (1 - nu**2)),
-            self.young * self.thickness**3 / (24 * (1 - nu**2)),
-        )
+        self._moduli = self.world_arrays(self._young * self._thickness / (8 * (1 - nu**2)),
+                                         self._young * self._thickness**3 / (24 * (1 - nu**2)))  # fmt: skip
         m22 = mat22(self.scalar)
         with wp.ScopedDevice(self.device):
+            self._penalty = wp.array(self._volume_penalty, dtype=wp.float64)
+            self._target = wp.zeros(worlds, dtype=wp.float64)
             self.ref_metric = wp.empty(n_q, dtype=m22)
             self.ref_metric_inv = wp.empty(n_q, dtype=m22)
             self.ref_curvature = wp.empty(n_q, dtype=m22)
             self.ref_weight = wp.empty(n_q, dtype=self.scalar, requires_grad=False)
             self._energy = wp.zeros(1, dtype=wp.float64, requires_grad=True)
-            self._moments = wp.zeros(1, dtype=VolumeMoments, requires_grad=True)
+            self._moments = wp.zeros(worlds, dtype=VolumeMoments, requires_grad=True)
             self._energy_density = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
             self._moment_terms = wp.zeros(max(n_q, mesh.n_vertices), dtype=VolumeMoments, requires_grad=True)
             self._c = wp.zeros(mesh.n_vertices, dtype=self.scalar)
@@ -157,12 +175,20 @@ class Shell:
         self.newton_steps = 0  # Newton steps of the last relaxation
         self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
 
+    @property
+    def worlds(self) -> int:
+        return self.mesh.worlds
+
+    def world_arrays(self, *values) -> list:
+        """Per-world parameters as device arrays of the shell's scalar (launch arguments)."""
+        return [wp.array(np.asarray(v, dtype=self._real), dtype=self.scalar, device=self.device) for v in values]
+
     def twin(self, dtype: str):
         """The same shell (terms, options, V̄) in another dtype on the same device: the Newton finish of a
         float32 shell works on its float64 twin. Self-contact is not copied."""
-        twin = Shell(self.mesh, self.thickness, self.young, self.poisson, self.AC, self.AI, self.volume_penalty,
+        twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
-                     bilayer_radius=self.bilayer_radius, device=self.device, dtype=dtype)  # fmt: skip
+                     bilayer_radius=self._bilayer_radius, device=self.device, dtype=dtype)  # fmt: skip
         twin.rest_volume = self.rest_volume
         return twin
 
@@ -179,15 +205,16 @@ class Shell:
             reference()()
 
     @property
-    def rest_volume(self) -> float:
-        """V̄ of the volume term μV (V − V̄)²: the rest shape's volume unless set (a pressure load). A new
-        value reaches every stepper's next step: their captured graphs are captured anew."""
-        return self._rest_volume
+    def rest_volume(self):
+        """V̄ of the volume term μV (V − V̄)²: the rest shape's volume unless set (a pressure load); one
+        per world (an array) for batched worlds that differ. A new value reaches every stepper's next step."""
+        return world_value(self._rest_volume)
 
     @rest_volume.setter
     def rest_volume(self, volume) -> None:
-        self._rest_volume = finite("rest_volume", volume)
-        self.notify_model_changed()  # captured loops hold the old V̄ as a launch argument
+        self._rest_volume = per_world("rest_volume", volume, self.worlds)
+        self._target.assign(self._rest_volume)
+        self.notify_model_changed()
 
     @property
     def self_contact(self):
@@ -216,10 +243,12 @@ class Shell:
         self.reference_c = c  # the Newton finish's float64 twin copies it (wavewarp/newton.py)
         self.reference.launch(self, c)
 
-    def _volume_of(self, x: wp.array) -> float:
+    def _volume_of(self, x: wp.array):
+        """The enclosed volume (one per world: an array for batched worlds)."""
         self._launch_volume(x, differentiable=False)
-        moments = self._moments.numpy()[0]
-        return float(moments[3] - moments[4:7] @ moments[:3] / self.mesh.n_vertices)
+        m = self._moments.numpy().astype(np.float64)
+        volumes = m[:, 3] - np.einsum("wi,wi->w", m[:, 4:7], m[:, :3]) / self.mesh.vertices_per_world
+        return float(volumes[0]) if self.worlds == 1 else volumes
 
     def _sum(self, values: wp.array, total: wp.array, differentiable: bool) -> None:
         """total[0] = Σ values: a block reduction (its blocks add atomically, in any order), Warp's
@@ -244,14 +273,15 @@ class Shell:
             self._sum(self._moment_terms, self._moments, differentiable)
             return
         self._moments.zero_()
-        threads = reduction_threads(n, self.deterministic)
-        wp.launch(volume_kernel, dim=threads, inputs=patch + [n, threads], outputs=[self._moments],
-                  block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
+        items = n // self.worlds
+        threads = reduction_threads(items, self.deterministic)  # per world: no block straddles two worlds
+        wp.launch(volume_kernel, dim=threads * self.worlds, inputs=patch + [self.worlds, items, threads],
+                  outputs=[self._moments], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
 
     def _elastic_inputs(self, x: wp.array, moduli=None) -> list:
         t = self.tables
         stretching, bending = self._moduli if moduli is None else moduli
-        return [x, *t.patch(), *self.reference_arrays(), self._s(stretching), self._s(bending), self._s(self.poisson)]
+        return [x, *t.patch(), *self.reference_arrays(), stretching, bending, self._s(self.poisson), self.worlds]
 
     def energy_device(self, x: wp.array, energy: wp.array) -> None:
         """energy[0] = E(x) at the current reference (float64; differentiable with wp.Tape)."""
@@ -260,11 +290,10 @@ class Shell:
         if self.self_contact is not None:
             self.self_contact.add_forces(x, None, self._energy_density)
         self._sum(self._energy_density, energy, differentiable=True)
-        if self.volume_penalty > 0:
-            self._launch_volume(x, differentiable=True)
-            wp.launch(volume_energy_kernel, dim=1,
-                      inputs=[self._moments, self.mesh.n_vertices, wp.float64(self.rest_volume),
-                              wp.float64(self.volume_penalty)],
+        if np.any(self._volume_penalty > 0):
+            self._launch_volume(x, differentiable=self.worlds == 1)  # the autodiff path has one world
+            wp.launch(volume_energy_kernel, dim=self.worlds,
+                      inputs=[self._moments, self.mesh.vertices_per_world, self._target, self._penalty],
                       outputs=[energy], device=self.device)  # fmt: skip
 
     def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array | None = None) -> None:
@@ -275,21 +304,27 @@ class Shell:
         if self.gradient == "autodiff":
             self._autodiff_forces(x, forces, self._energy if energy is None else energy)
             return
-        self._force_terms(x, forces, energy, None, self.rest_volume, self.volume_penalty)
+        self._force_terms(x, forces, energy, None, self._target, self._penalty)
 
     def volume_gradient_device(self, x: wp.array, gradient: wp.array) -> None:
         """gradient = ∂V/∂x: the volume term's forces at pressure -1 (μV = 1/2, V̄ = V + 1), no elastic terms."""
-        self._force_terms(x, gradient, None, (0.0, 0.0), self._volume_of(x) + 1.0, 0.5, contact=False)
+        zero = self.world_arrays(np.zeros(self.worlds))[0]
+        with wp.ScopedDevice(self.device):
+            target = wp.array(np.atleast_1d(self._volume_of(x)) + 1.0, dtype=wp.float64)
+            penalty = wp.full(self.worlds, 0.5, dtype=wp.float64)
+        self._force_terms(x, gradient, None, (zero, zero), target, penalty, contact=False)
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, contact: bool = True) -> None:
-        """forces_device with the elastic moduli (None: the shell's) and volume target and penalty given."""
+        """forces_device with the elastic moduli (None: the shell's) and the per-world volume targets and
+        penalties (float64 device arrays) given."""
         t = self.tables
-        volume = [self._moments, wp.float64(target), wp.float64(penalty)]
-        if penalty > 0:
+        volume = [self._moments, target, penalty]
+        with_volume = penalty is not self._penalty or np.any(self._volume_penalty > 0)
+        if with_volume:
             self._launch_volume(x, differentiable=False)  # V for the pressure, S and x̄ for the centroid term
             if not self.deterministic:  # the atomic scatter adds onto the centroid term
-                wp.launch(volume_centroid_forces_kernel, dim=len(forces), inputs=volume, outputs=[forces],
-                          device=self.device)  # fmt: skip
+                wp.launch(volume_centroid_forces_kernel, dim=len(forces), inputs=volume + [self.worlds],
+                          outputs=[forces], device=self.device)  # fmt: skip
         elif not self.deterministic:
             forces.zero_()  # the atomic scatter adds; the deterministic gather writes
         inputs = self._elastic_inputs(x, moduli) + [t.weights, *volume, int(energy is not None)]
@@ -301,14 +336,15 @@ class Shell:
                       outputs=[self._energy_density, self._jets], device=self.device)  # fmt: skip
             wp.launch(gather_forces_kernel, dim=self.mesh.n_vertices,
                       inputs=[self._jets, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis,
-                              t.points_per_triangle, *volume],
+                              t.points_per_triangle, *volume, self.worlds],
                       outputs=[forces], device=self.device)  # fmt: skip
         if contact and self.self_contact is not None:
             self.self_contact.add_forces(x, forces, None if energy is None else self._energy_density)
         if energy is not None:
             self._sum(self._energy_density, energy, differentiable=False)
-            if penalty > 0:
-                wp.launch(volume_energy_kernel, dim=1, inputs=[self._moments, self.mesh.n_vertices, *volume[1:]],
+            if with_volume:
+                wp.launch(volume_energy_kernel, dim=self.worlds, inputs=[self._moments, self.mesh.vertices_per_world,
+                                                                         *volume[1:]],
                           outputs=[energy], device=self.device)  # fmt: skip
 
     def _autodiff_forces(self, x: wp.array, forces: wp.array, energy: wp.array) -> None:

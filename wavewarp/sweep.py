@@ -9,6 +9,10 @@ Every point's result is written atomically to DIR/points/POINT.json as soon as i
 so a killed sweep loses only the points being computed; running the same sweep into the same
 DIR again computes only the points without a result. At the end the sweep writes DIR/table.csv
 (a row per point) and DIR/chart.png (a measurement against the grid).
+
+Scenes with batched worlds (`build_batch`: the walkers, wavewarp/batch.py) run a batch of points
+as one batched run: its points differ only in the per-world parameters (batch.PER_WORLD and the
+seed); points that differ in another are dealt to other batches.
 """
 
 from __future__ import annotations
@@ -24,12 +28,13 @@ import re
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import warp as wp
 from distributed import Client, Nanny, Scheduler, SpecCluster
 from tqdm import tqdm
 
+from .batch import PER_WORLD
 from .device import init_warp, set_deterministic
 from .driver import FAILURES, simulate
 from .figures import sweep_chart_png
@@ -154,21 +159,61 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
     return result
 
 
+def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
+    """The points of one batch as the worlds of one batched run (`module.build_batch`); each point's
+    result written as run_point writes it, its wall time the batch's, with `batch` {worlds, world}."""
+    results = [{"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
+                "batch": {"worlds": len(points), "world": w}} for w, point in enumerate(points)]  # fmt: skip
+    reports, start = [], time.perf_counter()
+    try:
+        run = module.build_batch([point_parameters(module, spec, point) for point in points],
+                                 seeds=[point.seed for point in points], device=spec.device, report=reports.append)  # fmt: skip
+        worlds = run.run()
+    except (ValueError, *FAILURES) as error:
+        worlds = [{"status": "failed", "error": str(error)}] * len(points)
+    else:
+        device = str(run.shell.device)
+        worlds = [{**world, "device": device, "reports": reports} for world in worlds]
+    for point, result, world in zip(points, results, worlds):
+        result.update(world, wall_time_s=time.perf_counter() - start)
+        write_json(result_path(out, point), result)
+    return results
+
+
 def run_batch(spec: SweepSpec, points, out: str) -> list:
-    """The points of one batch, one after another in this worker (each result written as it comes)."""
+    """The points of one batch in this worker (each result written as it comes): one batched run where
+    the scene has batched worlds, else one point after another."""
     wp.config.log_level = wp.LOG_WARNING
     set_deterministic(spec.deterministic)
+    module = load_scene(spec.scene)
+    if len(points) > 1 and hasattr(module, "build_batch"):
+        return run_worlds(spec, module, points, out)
     return [run_point(spec, point, out) for point in points]
 
 
-def batches(points, size: int) -> list:
+def world_group(spec: SweepSpec):
+    """point -> what a batch's worlds must share (their parameters but PER_WORLD), for a scene with
+    batched worlds; None for the others (any points may share a batch)."""
+    module = load_scene(spec.scene)
+    if not hasattr(module, "build_batch"):
+        return None
+    return lambda point: replace(point_parameters(module, spec, point), **dict.fromkeys(PER_WORLD))
+
+
+def batches(points, size: int, group=None) -> list:
     """The points dealt round-robin into ceil(n / size) batches of at most `size`: neighbours in the
     grid (which often cost alike: one twin, one coupling) go to different batches, so that batches cost
-    about the same."""
+    about the same. With `group` (point -> key) only points of one key share a batch."""
     if int(size) < 1:
         raise ValueError(f"--batch must be an integer >= 1, got {size!r}")
-    count = -(-len(points) // int(size))
-    return [points[k::count] for k in range(count)]
+    groups = {}
+    for point in points:
+        groups.setdefault(None if group is None else group(point), []).append(point)
+    dealt = []
+    for members in groups.values():
+        count = -(-len(members) // int(size))
+        dealt += [members[k::count] for k in range(count)]
+    return dealt
 
 
 def prepare_folder(spec: SweepSpec, out: str) -> None:
@@ -276,12 +321,16 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     DIR/chart.png. Returns the rows of the table (one dict per point)."""
     points = grid_points(spec)
     check_points(spec, points)
+    group = world_group(spec)
+    if spec.h5 and batch > 1 and group is not None:
+        raise ValueError(f"--h5 writes one trajectory per run, and {spec.scene} runs a batch of points as one batched "
+                         "run: use --batch 1 with --h5")  # fmt: skip
     prepare_folder(spec, out)
     missing = [p for p in points if not os.path.isfile(result_path(out, p))]
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
     if missing:
         with _executor(executor, spec, workers, scheduler, report) as pool:
-            futures = [pool.submit(run_batch, spec, group, out) for group in batches(missing, batch)]
+            futures = [pool.submit(run_batch, spec, points, out) for points in batches(missing, batch, group)]
             bar = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress)
             for future in concurrent.futures.as_completed(futures):
                 bar.update(len(future.result()))

@@ -107,6 +107,79 @@ def nearest_vertex(mesh: Mesh, point) -> int:
     return int(np.argmin(np.linalg.norm(mesh.vertices - np.asarray(point, dtype=np.float64), axis=1)))
 
 
+@dataclass(frozen=True)
+class Placement:
+    """A walker put down on the ground: its lifted `mesh`, `ground`, the contact's area per point `per`
+    (1 for the point contact), the rigid contact `depth`, the wave's `origin_vertex`, the direction of
+    propagation `forward` (+x, or -x mirrored)."""
+
+    mesh: Mesh
+    ground: Ground
+    per: float
+    depth: float
+    origin_vertex: int
+    forward: np.ndarray
+
+
+def place_walker(mesh: Mesh, p, origin) -> Placement:
+    """`mesh` on the ground (`ground_lift`, started at lift - depth) with the wave's origin vertex nearest
+    `origin` (mirrored in x with `p.mirror`)."""
+    area = limit_surface(mesh, device="cpu", dtype="float64").area.sum()
+    weight = p.density * p.gravity * area
+    per = 1.0
+    if p.contact == "area":  # the paper's k and β per point, spread over the area a of one
+        per = p.contact_area or area / mesh.n_vertices
+    ground = Ground(stiffness=p.stiffness / per, damping=p.contact_damping / per, friction=p.friction,
+                    sharpness=p.sharpness, contact=p.contact)  # fmt: skip
+    touching, depth = ground_lift(mesh, weight, ground)
+    lift = np.array([0.0, 0.0, touching - depth])
+    mirror = np.array([-1.0, 1.0, 1.0]) if p.mirror else np.ones(3)
+    lifted = Mesh(mesh.vertices + lift, mesh.triangles)
+    origin_vertex = nearest_vertex(lifted, mirror * np.asarray(origin, dtype=np.float64) + lift)
+    forward = np.array([-1.0, 0.0, 0.0]) if p.mirror else np.array([1.0, 0.0, 0.0])
+    return Placement(lifted, ground, per, depth, origin_vertex, forward)
+
+
+def walker_model(mesh: Mesh, ps: list, ground: Ground, *, size: float, bilayer: bool, rule: str, device):
+    """The walkers' model on `mesh` (one world per parameter set of `ps`, a `Mesh.union` for several):
+    the Koiter or bilayer shell with the per-world couplings and moduli, volume, gravity, ground and
+    the FHN wave of ps[0]."""
+    p = ps[0]
+    builder = ModelBuilder(mesh, device=device, dtype=p.dtype, rule=rule)
+    add_shell = builder.add_bilayer if bilayer else builder.add_koiter
+    add_shell(thickness=[q.thickness for q in ps], young=[q.young for q in ps], poisson=p.poisson,
+              AC=[q.AC for q in ps], AI=[q.AI for q in ps])  # fmt: skip
+    if any(q.mu_v > 0 for q in ps):
+        builder.add_volume(penalty=[q.mu_v * q.young * q.thickness / size**4 for q in ps])
+    builder.add_gravity(g=p.gravity, density=p.density).add_ground(ground)
+    builder.add_fitzhugh_nagumo(gamma=p.gamma, nu=p.nu, kappa=p.kappa, epsilon=p.epsilon, sensitive=p.sensitive,
+                                mass_corrections=p.mass_corrections, transport=p.transport)  # fmt: skip
+    return builder.finalize()
+
+
+def walker_dynamics(model, p, dt=None):
+    """The walkers' inertial (or overdamped) shell dynamics on `model`, bound by ω over the references the
+    wave visits (`bound_over_reference_range`); its step `dt` (None: safety × the bound)."""
+    if p.mechanics == "overdamped":
+        dynamics = model.dynamics(overdamped=True, drag=p.drag or None, safety=p.safety)
+    else:
+        dynamics = model.dynamics(damping=p.damping, safety=p.safety)
+    dynamics.set_time_step(dt, bound_over_reference_range(dynamics))
+    return dynamics
+
+
+def bound_over_reference_range(dynamics) -> float:
+    """ω for the mechanics' bound: the largest over the uniform references c = 0, c = 1 and the
+    FHN lower branch's c = -0.4 (the wave spans [-0.4, 1]); the contraction stiffens the shell."""
+    shell, omegas = dynamics.shell, [dynamics.omega_max]
+    n = shell.mesh.n_vertices
+    for value in (1.0, -0.4):
+        shell.update_reference(wp.full(n, value, dtype=shell.scalar, device=shell.device))
+        omegas.append(dynamics.largest_frequency())
+    shell.update_reference(wp.zeros(n, dtype=shell.scalar, device=shell.device))
+    return max(omegas)
+
+
 class WalkerRun(WaveClock):
     """An FHN wave on an inertial active shell on the ground: the sphere, prism, cube and bilayer walkers.
 
@@ -115,41 +188,20 @@ class WalkerRun(WaveClock):
     point in the mesh's coordinates (mirrored in x with `mirror`); `forward`, the direction of
     propagation, is +x (-x mirrored). The meshes are mirror-symmetric in x and y: the origin lies on
     the mirror plane y = 0 (no sideways walk) and mirroring it is exact. `bilayer`: the shell's
-    active reference is the supplement's bilayer model.
+    active reference is the supplement's bilayer model. `mechanics_dt`, when given, is the mechanics' step
+    while the shell settles (default: safety × its bound; a batch's worlds share the strictest).
     """
 
     def __init__(self, name: str, mesh: Mesh, p, *, radius: float, size: float, origin, bilayer: bool = False,
-                 rule: str = "3", device=None, report=print):  # fmt: skip
-        area = limit_surface(mesh, device="cpu", dtype="float64").area.sum()
-        weight = p.density * p.gravity * area
-        per = 1.0
-        if p.contact == "area":  # the paper's k and β per point, spread over the area a of one
-            per = p.contact_area or area / mesh.n_vertices
-        ground = Ground(stiffness=p.stiffness / per, damping=p.contact_damping / per, friction=p.friction,
-                        sharpness=p.sharpness, contact=p.contact)  # fmt: skip
-        touching, depth = ground_lift(mesh, weight, ground)
-        lift = np.array([0.0, 0.0, touching - depth])
-        mesh = Mesh(mesh.vertices + lift, mesh.triangles)
+                 rule: str = "3", device=None, mechanics_dt=None, report=print):  # fmt: skip
+        placed = place_walker(mesh, p, origin)
+        mesh, per, depth = placed.mesh, placed.per, placed.depth
         self.name, self.mesh, self.p, self.radius = name, mesh, p, radius
-        mirror = np.array([-1.0, 1.0, 1.0]) if p.mirror else np.ones(3)
-        self.origin_vertex = nearest_vertex(mesh, mirror * np.asarray(origin, dtype=np.float64) + lift)
-        self.forward = np.array([-1.0, 0.0, 0.0]) if p.mirror else np.array([1.0, 0.0, 0.0])
-        builder = ModelBuilder(mesh, device=device, dtype=p.dtype, rule=rule)
-        add_shell = builder.add_bilayer if bilayer else builder.add_koiter
-        add_shell(thickness=p.thickness, young=p.young, poisson=p.poisson, AC=p.AC, AI=p.AI)
-        if p.mu_v > 0:
-            builder.add_volume(penalty=p.mu_v * p.young * p.thickness / size**4)
-        builder.add_gravity(g=p.gravity, density=p.density).add_ground(ground)
-        builder.add_fitzhugh_nagumo(gamma=p.gamma, nu=p.nu, kappa=p.kappa, epsilon=p.epsilon, sensitive=p.sensitive,
-                                    mass_corrections=p.mass_corrections, transport=p.transport)  # fmt: skip
-        self.model = builder.finalize()
+        self.origin_vertex, self.forward = placed.origin_vertex, placed.forward
+        self.model = walker_model(mesh, [p], placed.ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
-        if p.mechanics == "overdamped":
-            self.dynamics = self.model.dynamics(overdamped=True, drag=p.drag or None, safety=p.safety)
-        else:
-            self.dynamics = self.model.dynamics(damping=p.damping, safety=p.safety)
+        self.dynamics = walker_dynamics(self.model, p, mechanics_dt)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
-        self._bound_over_reference_range()
         self.dynamics.run_until(p.settle)
         settled = self.dynamics.positions()
         self.rest_height = float(self.dynamics.mass @ mesh.vertices[:, 2] / self.dynamics.total_mass)  # rigid, in contact
@@ -166,6 +218,7 @@ class WalkerRun(WaveClock):
         self.arrival = FirstArrival(c0, device=self.shell.device, scalar=self.shell.scalar)
         self.steps_per_frame = max(1, round(t_end / p.frames / self.wave.dt))
         with wp.ScopedDevice(self.shell.device):
+            self._origin = wp.array([self.origin_vertex], dtype=wp.int32)
             self._trace_row = wp.zeros(1, dtype=wp.int32)
             self._trace_rows = wp.zeros((self.steps_per_frame, TRACE_COLUMNS - 1), dtype=self.shell.scalar)
         self.coupled = Walking(self.dynamics, self.wave, sensitive=p.sensitive, recorder=self._record_trace_row,
@@ -189,16 +242,6 @@ class WalkerRun(WaveClock):
         self.concentrations = []  # per frame: the control concentrations, for the run's colour scale (run_range)
         self.time_unit = FHN_TIME_UNIT
 
-    def _bound_over_reference_range(self) -> None:
-        """ω for the mechanics' bound: the largest over the uniform references c = 0, c = 1 and the
-        FHN lower branch's c = -0.4 (the wave spans [-0.4, 1]); the contraction stiffens the shell."""
-        shell, omegas = self.shell, [self.dynamics.omega_max]
-        for value in (1.0, -0.4):
-            shell.update_reference(wp.full(self.mesh.n_vertices, value, dtype=shell.scalar, device=shell.device))
-            omegas.append(self.dynamics.largest_frequency())
-        shell.update_reference(wp.zeros(self.mesh.n_vertices, dtype=shell.scalar, device=shell.device))
-        self.dynamics.set_time_step(None, max(omegas))
-
     def _sample(self) -> np.ndarray:
         c = self.wave.c.numpy()[self.origin_vertex]
         x = self.dynamics.positions()
@@ -209,7 +252,7 @@ class WalkerRun(WaveClock):
                 "reaction_per_vertex": self.wave.produced_per_vertex(), "first_arrival": self.arrival.times(self.wave.dt), "trace": self._frame_trace}  # fmt: skip
 
     def _record_trace_row(self) -> None:
-        self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self.origin_vertex, self._trace_row,
+        self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self._origin, self._trace_row,
                                               self._trace_rows)  # fmt: skip
         self.arrival.launch(self.wave.c)
 
@@ -262,21 +305,20 @@ class WalkerRun(WaveClock):
         return paths
 
 
-def sphere_walker_run(name: str, p, *, mesh=None, device=None, bilayer=False, seed=0, report=print) -> WalkerRun:
-    """The sphere walker: the icosphere rests on the vertex at its south pole (its coordinate planes
-    are mirror planes), the wave starts on the equator at -x (mirrored: +x)."""
+def sphere_walker_recipe(p, *, mesh=None, device=None, bilayer=False, report=print) -> tuple:
+    """The sphere walker's noiseless mesh and `WalkerRun` options: the icosphere rests on the vertex at its
+    south pole (its coordinate planes are mirror planes), the wave starts on the equator at -x
+    (mirrored: +x)."""
     R = p.radius
     mesh = scene_mesh(mesh, lambda: icosphere(R, p.level), report, size=("level", p.level, icosphere), device=device)
-    mesh = imperfect(mesh, p.noise * R, seed)
-    return WalkerRun(name, mesh, p, radius=R, size=R, origin=[-R, 0.0, 0.0], bilayer=bilayer, device=device,
-                     report=report)  # fmt: skip
+    return mesh, {"radius": R, "size": R, "origin": [-R, 0.0, 0.0], "bilayer": bilayer}
 
 
-def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis_to_x=False, mesh=None, device=None,
-                   seed=0, report=print) -> WalkerRun:  # fmt: skip
-    """A box walker resting on a face: `make_box(L, divisions)` centred at 0 (`axis_to_x`: a prism,
-    turned so that its axis lies along x and a square face down); the wave starts at
-    origins[p.origin] × L (in the turned frame)."""
+def box_walker_recipe(p, make_box, origins: dict, *, radius: float, axis_to_x=False, mesh=None, device=None,
+                      report=print) -> tuple:  # fmt: skip
+    """A box walker's noiseless mesh and `WalkerRun` options: resting on a face, `make_box(L, divisions)`
+    centred at 0 (`axis_to_x`: a prism, turned so that its axis lies along x and a square face down);
+    the wave starts at origins[p.origin] × L (in the turned frame)."""
     L = p.edge
 
     def build():
@@ -285,7 +327,20 @@ def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis
             box = Mesh(box.vertices[:, [2, 0, 1]], box.triangles)
         return box
 
-    mesh = imperfect(scene_mesh(mesh, build, report, size=("divisions", p.divisions, make_box), device=device),
-                     p.noise * radius, seed)  # fmt: skip
+    mesh = scene_mesh(mesh, build, report, size=("divisions", p.divisions, make_box), device=device)
     origin = np.asarray(origins[p.origin], dtype=np.float64) * L
-    return WalkerRun(name, mesh, p, radius=radius, size=L, origin=origin, rule=p.rule, device=device, report=report)
+    return mesh, {"radius": radius, "size": L, "origin": origin, "rule": p.rule}
+
+
+def sphere_walker_run(name: str, p, *, mesh=None, device=None, bilayer=False, seed=0, report=print) -> WalkerRun:
+    """The sphere walker (`sphere_walker_recipe`), its rest shape perturbed by `p.noise` (seeded)."""
+    mesh, options = sphere_walker_recipe(p, mesh=mesh, device=device, bilayer=bilayer, report=report)
+    return WalkerRun(name, imperfect(mesh, p.noise * p.radius, seed), p, device=device, report=report, **options)
+
+
+def box_walker_run(name: str, p, make_box, origins: dict, *, radius: float, axis_to_x=False, mesh=None, device=None,
+                   seed=0, report=print) -> WalkerRun:  # fmt: skip
+    """A box walker (`box_walker_recipe`), its rest shape perturbed by `p.noise` × radius (seeded)."""
+    mesh, options = box_walker_recipe(p, make_box, origins, radius=radius, axis_to_x=axis_to_x, mesh=mesh,
+                                      device=device, report=report)  # fmt: skip
+    return WalkerRun(name, imperfect(mesh, p.noise * radius, seed), p, device=device, report=report, **options)

@@ -133,10 +133,11 @@ class _Stepper(Stepper):
         """Read the flag of a chunk of `steps` steps (after the solver's `launch_checks`, whose message is
         `cause`): None when clear, else the error to raise once the state is restored. `coupled` names a
         coupling in the message."""
-        code = self.solver.flag.numpy()[0]
+        codes = self.solver.flag.numpy()  # one per world
+        code = codes[codes != 0][0] if codes.any() else 0
         if not code:
             return None
-        bound = self.solver.stable_dt()
+        bound = self.solver.stable_dt(last_if_broken=True)
         window = f"between t = {self.time:.6g} and t = {self.time + steps * self.dt:.6g}"
         restored = f"the state is restored to t = {self.time:.6g}"
         if code == FLIP_FLOP:

@@ -1,0 +1,186 @@
+"""Batched worlds (issue 28): aggregate world-steps per second of N walker worlds stepped together in
+one batched run, against the same worlds run one after another in the same process.
+
+    wavewarp bench batch --device cuda:0 --levels 4 5 --worlds 1 4 16 64 256 --out benchmarks/results
+
+The sphere walker (R = 25, h = 0.084 R, μV = 0.4 Yh/R⁴, the ground), deformation-sensitive FHN at
+the scene's dt_c = 0.5 with its mechanics substeps (`coupled.Walking`); world w has its own AC
+(0 … 0.3 over the worlds) and rest shape (seeded noise 0.01 R); each settles on the ground first (the
+scene's 40 time units) and the wave starts from the scene's Gaussian at vertex 0. Every N shares one mechanics step
+(ω of the stiffest world, AC = 0.3, over the references the wave visits), so each row does the same
+work per world-step. Per level and N: the batched run's coupled steps per second × N (world-steps/s,
+and × substeps the mechanics world-steps/s); the sequential baseline runs min(N, 4) of the same
+worlds one after another, each as its own single-world run, and reports their aggregate (the same
+for every N: a single run's rate); the ratio of the two; the host seconds to build the batch; and
+the Koiter force kernel alone on the union (its time against the roofline floor of `bench speed`).
+Writes batch_<device>.json and batch_<device>.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from datetime import date
+
+import numpy as np
+import warp as wp
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from speed import WALKER, koiter_counts, machine_peaks, seconds_per_call, walker_ground  # noqa: E402
+
+from wavewarp.coupled import Walking  # noqa: E402
+from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
+from wavewarp.dynamics import ShellDynamics  # noqa: E402
+from wavewarp.initial import gaussian_pulse  # noqa: E402
+from wavewarp.io import write_json, write_png  # noqa: E402
+from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
+from wavewarp.mesh import Mesh, icosphere  # noqa: E402
+from wavewarp.runs import imperfect, mean_edge  # noqa: E402
+from wavewarp.shell import Shell  # noqa: E402
+from wavewarp.walker import bound_over_reference_range, ground_lift  # noqa: E402
+from wavewarp.waves import FitzHughNagumo  # noqa: E402
+
+RADIUS, THICKNESS, MU_V, AC_MAX, NOISE = 25.0, 2.1, 0.4, 0.3, 0.01
+
+
+def world_meshes(level: int, count: int) -> list:
+    """`count` sphere walkers on the ground: the icosphere, seeded noise 0.01 R per world, lifted to touch."""
+    sphere = icosphere(RADIUS, level)
+    weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
+    touching, depth = ground_lift(sphere, weight, walker_ground())
+    lift = np.array([0.0, 0.0, touching - depth])
+    return [Mesh(imperfect(sphere, NOISE * RADIUS, seed).vertices + lift, sphere.triangles) for seed in range(count)]
+
+
+def walking(meshes: list, couplings: list, device, dtype: str, omega=None) -> Walking:
+    """The coupled walker of `meshes` as one batched run (one world each, AC from `couplings`); `omega`
+    sets the mechanics' bound (None: the Lanczos estimate over the wave's references)."""
+    mesh = Mesh.union(meshes) if len(meshes) > 1 else meshes[0]
+    shell = Shell(mesh, THICKNESS, WALKER["young"], WALKER["poisson"], AC=couplings, AI=0.0,
+                  volume_penalty=MU_V * WALKER["young"] * THICKNESS / RADIUS**4, device=device, dtype=dtype)  # fmt: skip
+    dynamics = ShellDynamics(shell, density=WALKER["density"], gravity=WALKER["gravity"], ground=walker_ground(),
+                             damping=WALKER["damping"], omega=omega)  # fmt: skip
+    if omega is None:
+        dynamics.set_time_step(None, bound_over_reference_range(dynamics))
+    dynamics.run_until(WALKER["settle"])
+    operator = LaplaceBeltrami(mesh, dynamics.state.x, assembled=False, device=device, dtype=dtype)  # as the walker scenes
+    single = LaplaceBeltrami(meshes[0], device=device, dtype=dtype)
+    width = 1.5 * mean_edge(meshes[0])  # the scene's default
+    c0, _ = gaussian_pulse(single, 0, width / RADIUS, gamma=WALKER["gamma"], radius=RADIUS)
+    wave = FitzHughNagumo(operator, WALKER["gamma"], c0=np.tile(c0, len(meshes)), dt=WALKER["dt"],
+                          mass_corrections=WALKER["mass_corrections"])  # fmt: skip
+    return Walking(dynamics, wave, sensitive=True)
+
+
+def steps_per_second(walk: Walking, budget: float) -> float:
+    """Coupled steps per second over `Walking.advance` (guarded chunks, host checks included), after a
+    warm-up chunk that compiles and captures."""
+    walk.advance(walk.check_every)
+    device = walk.shell.device
+    steps = walk.check_every
+    start = time.perf_counter()
+    walk.advance(steps)
+    wp.synchronize_device(device)
+    once = time.perf_counter() - start
+    steps = max(steps, int(budget / once * steps) // steps * steps)
+    start = time.perf_counter()
+    walk.advance(steps)
+    wp.synchronize_device(device)
+    return steps / (time.perf_counter() - start)
+
+
+def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peaks: dict) -> list:
+    meshes = world_meshes(level, max(worlds))
+    couplings = list(np.linspace(0.0, AC_MAX, max(worlds)))
+    omega = walking([meshes[-1]], [AC_MAX], device, dtype).dynamics.omega_max  # the stiffest world
+    sequential = []
+    for w in range(min(4, max(worlds))):  # the same worlds, one single run after another
+        walk = walking([meshes[w]], [couplings[w]], device, dtype, omega)
+        sequential.append(steps_per_second(walk, budget / 4))
+    seconds_per_world_step = float(np.mean([1 / rate for rate in sequential]))
+    rows = []
+    for n in worlds:
+        start = time.perf_counter()
+        walk = walking(meshes[:n], couplings[:n] if n > 1 else [couplings[0]], device, dtype, omega)
+        build = time.perf_counter() - start
+        rate = steps_per_second(walk, budget)
+        shell = walk.shell
+        x = wp.clone(walk.dynamics.state.x)
+        forces = seconds_per_call(lambda: shell.forces_device(x, walk.dynamics.solver._forces), device, budget / 2)
+        counts = koiter_counts(shell)
+        floor = max(counts["bytes"] / peaks["bandwidth_bytes_per_s"], counts["flops"] / peaks["flops_per_s"])
+        row = dict(level=level, worlds=n, triangles_per_world=meshes[0].n_triangles, triangles=n * meshes[0].n_triangles,
+                   dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
+                   world_steps_per_second=n * rate, mechanics_world_steps_per_second=n * rate * walk.substeps,
+                   sequential_world_steps_per_second=1 / seconds_per_world_step,
+                   speedup_vs_sequential=n * rate * seconds_per_world_step, shell_forces_seconds=forces,
+                   shell_forces_times_floor=forces / floor)  # fmt: skip
+        rows.append(row)
+        print(f"level {level} {n:4d} worlds ({row['triangles']:>8d} tri) {dtype}: {row['world_steps_per_second']:9.3e} "
+              f"world-steps/s ({row['mechanics_world_steps_per_second']:9.3e} mechanics), x{row['speedup_vs_sequential']:.1f} "
+              f"vs sequential; shell forces {forces * 1e3:.3f} ms = {row['shell_forces_times_floor']:.1f}x floor; "
+              f"built in {build:.1f} s", flush=True)  # fmt: skip
+    return rows
+
+
+def chart(result: dict, path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
+    for k, level in enumerate(sorted({r["level"] for r in result["rows"]})):
+        rows = [r for r in result["rows"] if r["level"] == level]
+        label = f"{rows[0]['triangles_per_world']:,} triangles per world"
+        left.loglog([r["worlds"] for r in rows], [r["mechanics_world_steps_per_second"] for r in rows], "o-",
+                    color=f"C{k}", label=f"batched, {label}")  # fmt: skip
+        left.loglog([r["worlds"] for r in rows], [r["sequential_world_steps_per_second"] * r["substeps"] for r in rows],
+                    "s--", color=f"C{k}", label=f"one after another, {label}")  # fmt: skip
+        right.semilogx([r["worlds"] for r in rows], [r["speedup_vs_sequential"] for r in rows], "o-", color=f"C{k}",
+                       label=label)  # fmt: skip
+    left.set_xlabel("worlds N")
+    left.set_ylabel("mechanics world-steps per second")
+    left.set_title(f"sphere walkers, {result['device_name']}")
+    left.legend(fontsize=7)
+    right.axhline(10, color="grey", lw=0.8, ls=":")
+    right.set_xlabel("worlds N")
+    right.set_ylabel("batched / one after another")
+    right.set_title("aggregate speed-up")
+    right.legend(fontsize=7)
+    fig.tight_layout()
+    write_png(fig, path, dpi=110)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="wavewarp bench batch", description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--levels", type=int, nargs="+", default=[4, 5], help="icosphere levels (4: 5,120 triangles)")
+    parser.add_argument("--worlds", type=int, nargs="+", default=[1, 4, 16, 64, 256])
+    parser.add_argument("--max-triangles", type=int, default=5_300_000, help="skip batches larger than this")
+    parser.add_argument("--dtype", default="float32", choices=("float32", "float64"))
+    parser.add_argument("--budget", type=float, default=2.0, help="seconds per timing")
+    parser.add_argument("--out", default="benchmarks/results")
+    parser.add_argument("--quick", action="store_true", help="level 1, 1 and 3 worlds, short timings (smoke test)")
+    args = parser.parse_args(argv)
+    wp.config.log_level = wp.LOG_WARNING
+    device = resolve_device(args.device)
+    levels, worlds, budget = ([1], [1, 3], 0.05) if args.quick else (args.levels, sorted(args.worlds), args.budget)
+    peaks = machine_peaks(device)
+    rows = []
+    for level in levels:
+        fitting = [n for n in worlds if n * 20 * 4**level <= args.max_triangles]
+        rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks)
+    result = dict(benchmark="batch", date=date.today().isoformat(), **describe_device(device), peaks=peaks, rows=rows)
+    os.makedirs(args.out, exist_ok=True)
+    stem = os.path.join(args.out, f"batch_{device_tag(device)}")
+    write_json(stem + ".json", result)
+    chart(result, stem + ".png")
+    print(f"wrote {stem}.json, {stem}.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,22 @@
+"""`wavewarp bench batch --quick` (issue 28): writes its table and chart; the figures are consistent."""
+
+import json
+
+import pytest
+
+from wavewarp.cli import main as cli
+
+
+@pytest.mark.slow
+def test_bench_batch_quick_writes_json_and_chart(tmp_path):
+    assert cli(["bench", "batch", "--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
+    result = json.loads((tmp_path / "batch_cpu.json").read_text())
+    assert (tmp_path / "batch_cpu.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = result["rows"]
+    assert [r["worlds"] for r in rows] == [1, 3] and len({r["substeps"] for r in rows}) == 1  # one mechanics step
+    for row in rows:
+        assert row["triangles"] == row["worlds"] * row["triangles_per_world"] == row["worlds"] * 80
+        assert row["world_steps_per_second"] == pytest.approx(row["worlds"] * row["steps_per_second"])
+        assert row["speedup_vs_sequential"] == pytest.approx(row["world_steps_per_second"]
+                                                             / row["sequential_world_steps_per_second"])  # fmt: skip
+        assert row["shell_forces_seconds"] > 0 and row["shell_forces_times_floor"] > 0

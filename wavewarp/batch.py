@@ -1,0 +1,191 @@
+"""Batched walkers (docs/theory/batches.md): N walker worlds of one mesh topology stepped together.
+
+The worlds' meshes form one `Mesh.union`; one Model holds them with per-world couplings and moduli
+(AC, AI, h, Y, μV), one State holds every world's x, v, c, w, and every solver steps all worlds in
+the same launches and the same captured graph. Worlds never interact: every reduction (volume,
+rigid-body sums, the trace) is per world, so in deterministic float64 each world equals its own
+single run bit for bit (tests/test_batch.py). A world that blows up is stopped at the start of the
+chunk it failed in and reported; the others go on.
+
+    batch = sphere_walker_batch([p0, p1, p2], seeds=[0, 1, 2], device="cuda")
+    results = batch.run()        # one dict per world: status, stopped, measurements, parameters
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields, replace
+
+import numpy as np
+import warp as wp
+
+from .balance import ChemicalBalance, FirstArrival, arrival_measurements
+from .chemistry import fhn_kinetic_period
+from .coupled import Walking
+from .driver import FAILURES
+from .initial import gaussian_pulse
+from .laplace import LaplaceBeltrami
+from .measurements import locomotion
+from .mesh import Mesh
+from .parameters import as_dict
+from .runs import WaveClock, imperfect, mean_edge
+from .walker import AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, walker_dynamics, walker_model
+
+PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "mirror", "noise")  # and the seed: the rest is shared
+
+
+def check_batch(ps: list) -> None:
+    """ValueError unless the worlds' parameters differ only in PER_WORLD."""
+    if not ps:
+        raise ValueError("a batch needs at least one world")
+    first = ps[0]
+    for w, p in enumerate(ps[1:], 1):
+        differ = [f.name for f in fields(first) if f.name not in PER_WORLD and getattr(p, f.name) != getattr(first, f.name)]
+        if differ:
+            raise ValueError(f"world {w} differs from world 0 in {', '.join(differ)}: the worlds of a batch share every "
+                             f"parameter but {', '.join(PER_WORLD)} (and the seed); run the others in another batch")  # fmt: skip
+
+
+class WalkerBatch(WaveClock):
+    """Walker worlds stepped together: `meshes` (one topology) and parameters `ps` one per world; `radius`,
+    `size`, `origin`, `bilayer`, `rule` as `WalkerRun`'s. The worlds share the chemistry's and the
+    mechanics' steps: the strictest world's bounds (ω the largest over every world)."""
+
+    def __init__(self, name: str, meshes: list, ps: list, *, radius: float, size: float, origin, bilayer: bool = False,
+                 rule: str = "3", device=None, report=print):  # fmt: skip
+        ps = list(ps)
+        check_batch(ps)
+        if len(meshes) != len(ps):
+            raise ValueError(f"a batch needs one mesh per world: {len(meshes)} meshes for {len(ps)} parameter sets")
+        p = ps[0]
+        placed = [place_walker(mesh, q, origin) for mesh, q in zip(meshes, ps)]
+        if len({pl.ground for pl in placed}) > 1:
+            raise ValueError("the worlds' grounds differ (the area contact's automatic area per point follows each "
+                             "world's area): set contact_area to one value for the batch")  # fmt: skip
+        self.name, self.ps, self.radius, self.placed, self.worlds = name, ps, radius, placed, len(ps)
+        self.mesh = Mesh.union([pl.mesh for pl in placed])
+        self.model = walker_model(self.mesh, ps, placed[0].ground, size=size, bilayer=bilayer, rule=rule, device=device)
+        self.shell = self.model.shell
+        self.dynamics = walker_dynamics(self.model, p)
+        self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
+        self.settle_dt = self.dynamics.dt  # the step while settling; the coupling divides the chemistry's
+        self.dynamics.run_until(p.settle)
+        n = self.vertices = self.mesh.vertices_per_world
+        self._slices = [slice(w * n, (w + 1) * n) for w in range(self.worlds)]
+        settled, mass = self.dynamics.positions(), self.dynamics.mass
+        self.rest_heights = [float(mass[s] @ pl.mesh.vertices[:, 2] / m)
+                             for s, pl, m in zip(self._slices, placed, self.dynamics.world_masses)]  # fmt: skip
+        self.operator = self.model.operator(settled if p.sensitive else None, assembled=not p.sensitive)
+        self.widths = [p.width or 1.5 * mean_edge(pl.mesh) for pl in placed]
+        c0 = np.concatenate([self._pulse(pl, settled[s], width, rule, device)
+                             for pl, s, width in zip(placed, self._slices, self.widths)])  # fmt: skip
+        t_end = p.periods * self.period_kinetic
+        dt = p.dt or min(AUTO_DT_SAFETY * self.model.wave(self.operator, c0=c0).stable_dt, t_end / p.frames)
+        self.wave = self.model.wave(self.operator, c0=c0, dt=dt)
+        mass, c = self.operator.mass(), self.wave.concentration()
+        self.initial_totals = np.array([float(mass[s] @ c[s]) for s in self._slices])  # as WalkerRun's total()
+        self.balance = ChemicalBalance(self.mesh, sensitive=p.sensitive, rule=rule, device=device, dtype=p.dtype)
+        self.arrival = FirstArrival(c0, device=self.shell.device, scalar=self.shell.scalar)
+        self.steps_per_frame = max(1, round(t_end / p.frames / self.wave.dt))
+        with wp.ScopedDevice(self.shell.device):
+            self._origins = wp.array([w * n + pl.origin_vertex for w, pl in enumerate(placed)], dtype=wp.int32)
+            self._trace_row = wp.zeros(self.worlds, dtype=wp.int32)
+            self._trace_rows = wp.zeros((self.steps_per_frame, self.worlds * (TRACE_COLUMNS - 1)), dtype=self.shell.scalar)
+        self.coupled = Walking(self.dynamics, self.wave, sensitive=p.sensitive, recorder=self._record_trace_row,
+                               ramp=p.ramp)  # fmt: skip
+        self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
+        self.resolved = [{**as_dict(replace(q, width=width, dt=dt)), "mechanics_dt": self.dynamics.dt,
+                          "substeps": self.coupled.substeps, "period_kinetic": self.period_kinetic}
+                         for q, width in zip(ps, self.widths)]  # fmt: skip
+        self.traces = [self._sample(w)[None] for w in range(self.worlds)]  # every chemistry step, as WalkerRun.trace
+
+    def _pulse(self, placed, x, width: float, rule: str, device) -> np.ndarray:
+        """World's initial c: the Gaussian on its own operator, exactly as its single run makes it."""
+        p = self.ps[0]
+        operator = LaplaceBeltrami(placed.mesh, x if p.sensitive else None, rule=rule, assembled=not p.sensitive,
+                                   device=device, dtype=p.dtype)  # fmt: skip
+        return gaussian_pulse(operator, placed.origin_vertex, width / self.radius, gamma=p.gamma, radius=self.radius)[0]
+
+    def _per_world(self, values: np.ndarray) -> np.ndarray:
+        """Σ over each world's vertices (the sums its single run takes)."""
+        return np.array([float(np.sum(values[s])) for s in self._slices])
+
+    def _sample(self, w: int) -> np.ndarray:
+        s, origin = self._slices[w], self.placed[w].origin_vertex
+        c, x = self.wave.c.numpy()[s], self.dynamics.positions()[s]
+        centre = self.dynamics.mass[s] @ x / self.dynamics.world_masses[w]
+        return np.array([self.wave.time, c[origin], *centre, *x[origin]])
+
+    def _record_trace_row(self) -> None:
+        self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self._origins, self._trace_row,
+                                              self._trace_rows)  # fmt: skip
+        self.arrival.launch(self.wave.c)
+
+    @property
+    def stopped(self) -> dict:
+        """World -> the error that stopped it."""
+        return self.coupled.stopped
+
+    def advance_frame(self) -> None:
+        """One frame of coupled steps of every world; its trace rows are read once."""
+        start = self.wave.steps
+        self._trace_row.zero_()
+        self.coupled.advance(self.steps_per_frame)
+        times = (start + np.arange(1, self.steps_per_frame + 1)) * self.wave.dt
+        rows = self._trace_rows.numpy().astype(np.float64)
+        width = TRACE_COLUMNS - 1
+        for w in range(self.worlds):
+            kept = times <= self.stopped[w].time + 1e-9 * self.wave.dt if w in self.stopped else slice(None)
+            block = np.column_stack([times, rows[:, w * width:(w + 1) * width]])[kept]
+            self.traces[w] = np.concatenate([self.traces[w], block])
+
+    def record(self) -> None:
+        """The chemical balance of every world at the current frame."""
+        produced = self._per_world(self.wave.produced_per_vertex().astype(np.float64))
+        self.balance.record(self.time, self.dynamics.positions(), self.wave.concentration(),
+                            self.initial_totals + produced)  # fmt: skip
+
+    def run(self, progress=None) -> list:
+        """Every frame (`progress(frames done)` after each); returns one result per world: status ("done", or
+        "stopped" with its error), the frames it completed (the first included), its measurements and
+        resolved parameters."""
+        self.record()
+        stopped_after = {}  # world -> the frames it completed before it stopped
+        for frame in range(self.frames):
+            try:
+                self.advance_frame()
+            except FAILURES:  # every world has stopped
+                break
+            finally:
+                for w in self.stopped:
+                    stopped_after.setdefault(w, frame)
+            self.record()
+            if progress is not None:
+                progress(frame + 1)
+        return [self.result(w, stopped_after.get(w, self.frames)) for w in range(self.worlds)]
+
+    def result(self, w: int, frames: int) -> dict:
+        stopped = self.stopped.get(w)
+        return {"status": "stopped" if stopped else "done", "stopped": str(stopped) if stopped else None,
+                "frames": frames + 1, "steps": self.steps, "parameters": self.resolved[w],
+                "measurements": self.measurements(w)}  # fmt: skip
+
+    def measurements(self, w: int) -> dict:
+        """World w's measurements, as its `WalkerRun.measurements`."""
+        placed = self.placed[w]
+        return {"time": self.time, "mechanics_steps": self.steps * self.coupled.substeps,
+                "contact_depth_R": placed.depth / self.radius, **self.balance.measurements(w),
+                **arrival_measurements(self.arrival.times(self.wave.dt)[self._slices[w]]),
+                **locomotion(self.traces[w], placed.forward, self.radius, self.rest_heights[w], self.period_kinetic)}  # fmt: skip
+
+
+def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print) -> WalkerBatch:
+    """A scene's walkers as one batch: `recipe(p, device=, report=)` gives the scene's noiseless mesh and
+    options (`sphere_walker_recipe`, `box_walker_recipe`); world w is ps[w] with its rest shape
+    perturbed by ps[w].noise × radius, seeded by seeds[w]."""
+    ps, seeds = list(ps), [int(s) for s in seeds]
+    if len(seeds) != len(ps):
+        raise ValueError(f"a batch needs one seed per world: {len(seeds)} seeds for {len(ps)} parameter sets")
+    check_batch(ps)
+    mesh, options = recipe(ps[0], device=device, report=report)
+    meshes = [imperfect(mesh, p.noise * options["radius"], seed) for p, seed in zip(ps, seeds)]
+    return WalkerBatch(name, meshes, ps, device=device, report=report, **options)
