@@ -5,10 +5,11 @@ one batched run, against the same worlds run one after another in the same proce
 
 The sphere walker (R = 25, h = 0.084 R, μV = 0.4 Yh/R⁴, the ground), deformation-sensitive FHN at
 the scene's dt_c = 0.5 with its mechanics substeps (`coupled.Walking`); world w has its own AC
-(0 … 0.3 over the worlds) and rest shape (seeded noise 0.01 R); each settles on the ground first (the
-scene's 40 time units) and the wave starts from the scene's Gaussian at vertex 0. Every N shares one mechanics step
-(ω of the stiffest world, AC = 0.3, over the references the wave visits), so each row does the same
-work per world-step. Per level and N: the batched run's coupled steps per second × N (world-steps/s,
+(0 … 0.3 over the worlds) and rest shape (seeded noise, 0.01 R by default); each settles on the ground first (the
+scene's 40 time units) and the wave starts from the scene's Gaussian at vertex 0. Every N shares one ω (the stiffest
+world's, AC = 0.3, over the references the wave visits); the contact damping in the bound is the
+strictest world's, so the mechanics substeps per chemistry step grow by up to 2% with N (the
+mechanics world-steps/s count them). Per level and N: the batched run's coupled steps per second × N (world-steps/s,
 and × substeps the mechanics world-steps/s); the sequential baseline runs min(N, 4) of the same
 worlds one after another, each as its own single-world run, and reports their aggregate (the same
 for every N: a single run's rate); the ratio of the two; the host seconds to build the batch; and
@@ -42,16 +43,16 @@ from wavewarp.shell import Shell  # noqa: E402
 from wavewarp.walker import bound_over_reference_range, ground_lift  # noqa: E402
 from wavewarp.waves import FitzHughNagumo  # noqa: E402
 
-RADIUS, THICKNESS, MU_V, AC_MAX, NOISE = 25.0, 2.1, 0.4, 0.3, 0.01
+RADIUS, THICKNESS, MU_V, AC_MAX = 25.0, 2.1, 0.4, 0.3
 
 
-def world_meshes(level: int, count: int) -> list:
-    """`count` sphere walkers on the ground: the icosphere, seeded noise 0.01 R per world, lifted to touch."""
+def world_meshes(level: int, count: int, noise: float) -> list:
+    """`count` sphere walkers on the ground: the icosphere, seeded noise × R per world, lifted to touch."""
     sphere = icosphere(RADIUS, level)
     weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
     touching, depth = ground_lift(sphere, weight, walker_ground())
     lift = np.array([0.0, 0.0, touching - depth])
-    return [Mesh(imperfect(sphere, NOISE * RADIUS, seed).vertices + lift, sphere.triangles) for seed in range(count)]
+    return [Mesh(imperfect(sphere, noise * RADIUS, seed).vertices + lift, sphere.triangles) for seed in range(count)]
 
 
 def walking(meshes: list, couplings: list, device, dtype: str, omega=None) -> Walking:
@@ -65,7 +66,7 @@ def walking(meshes: list, couplings: list, device, dtype: str, omega=None) -> Wa
     if omega is None:
         dynamics.set_time_step(None, bound_over_reference_range(dynamics))
     dynamics.run_until(WALKER["settle"])
-    operator = LaplaceBeltrami(mesh, dynamics.state.x, assembled=False, device=device, dtype=dtype)  # as the walker scenes
+    operator = LaplaceBeltrami(mesh, dynamics.state.x, assembled=False, device=device, dtype=dtype)  # as the scenes
     single = LaplaceBeltrami(meshes[0], device=device, dtype=dtype)
     width = 1.5 * mean_edge(meshes[0])  # the scene's default
     c0, _ = gaussian_pulse(single, 0, width / RADIUS, gamma=WALKER["gamma"], radius=RADIUS)
@@ -91,8 +92,8 @@ def steps_per_second(walk: Walking, budget: float) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peaks: dict) -> list:
-    meshes = world_meshes(level, max(worlds))
+def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peaks: dict, noise: float) -> list:
+    meshes = world_meshes(level, max(worlds), noise)
     couplings = list(np.linspace(0.0, AC_MAX, max(worlds)))
     omega = walking([meshes[-1]], [AC_MAX], device, dtype).dynamics.omega_max  # the stiffest world
     sequential = []
@@ -111,8 +112,8 @@ def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peak
         forces = seconds_per_call(lambda: shell.forces_device(x, walk.dynamics.solver._forces), device, budget / 2)
         counts = koiter_counts(shell)
         floor = max(counts["bytes"] / peaks["bandwidth_bytes_per_s"], counts["flops"] / peaks["flops_per_s"])
-        row = dict(level=level, worlds=n, triangles_per_world=meshes[0].n_triangles, triangles=n * meshes[0].n_triangles,
-                   dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
+        per_world = meshes[0].n_triangles
+        row = dict(level=level, worlds=n, noise_R=noise, triangles_per_world=per_world, triangles=n * per_world, dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
                    world_steps_per_second=n * rate, mechanics_world_steps_per_second=n * rate * walk.substeps,
                    sequential_world_steps_per_second=1 / seconds_per_world_step,
                    speedup_vs_sequential=n * rate * seconds_per_world_step, shell_forces_seconds=forces,
@@ -161,6 +162,7 @@ def main(argv=None) -> int:
     parser.add_argument("--worlds", type=int, nargs="+", default=[1, 4, 16, 64, 256])
     parser.add_argument("--max-triangles", type=int, default=5_300_000, help="skip batches larger than this")
     parser.add_argument("--dtype", default="float32", choices=("float32", "float64"))
+    parser.add_argument("--noise", type=float, default=0.01, help="rest-shape noise per world / R (seeded)")
     parser.add_argument("--budget", type=float, default=2.0, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="level 1, 1 and 3 worlds, short timings (smoke test)")
@@ -172,7 +174,7 @@ def main(argv=None) -> int:
     rows = []
     for level in levels:
         fitting = [n for n in worlds if n * 20 * 4**level <= args.max_triangles]
-        rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks)
+        rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks, args.noise)
     result = dict(benchmark="batch", date=date.today().isoformat(), **describe_device(device), peaks=peaks, rows=rows)
     os.makedirs(args.out, exist_ok=True)
     stem = os.path.join(args.out, f"batch_{device_tag(device)}")

@@ -1,6 +1,6 @@
 """`wavewarp bench sweep_scaling --quick` on CPU workers: a row per worker count, the efficiency
-against the first, the same table from every worker count (a CPU run is deterministic), and a
-kept cluster's sweep faster than one that starts its own."""
+against the first, the same table from every worker count (a CPU run is deterministic), also on a
+kept cluster. (How much the kept cluster saves is a timing: BENCHMARKS.md, not a test.)"""
 
 import json
 
@@ -19,5 +19,5 @@ def test_bench_sweep_scaling_quick_writes_a_row_per_worker_count(tmp_path):
     assert all(r["differing_values"] == 0 and r["kept_cluster_differing_values"] == 0 for r in rows)
     for row in rows:
         assert row["efficiency"] == pytest.approx(rows[0]["wall_s"] / (row["wall_s"] * row["workers"]), rel=1e-12)
-        assert 0 < row["kept_cluster_wall_s"] < row["wall_s"]  # no cluster start, imports or kernel loading
+        assert row["kept_cluster_wall_s"] > 0
     assert (tmp_path / "sweep_scaling_cpu.png").stat().st_size > 0

@@ -14,6 +14,8 @@ COARSER = [  # (README text, what the test runs instead); each must be found, so
      "ww.sample_points(sphere, np.array([0, 7]), np.array([[0.2, 0.3], [0.1, 0.1]]))"),
     ("Shell(icosphere(1.0, 3)", "Shell(icosphere(1.0, 1)"),
     ("run.run_until(20.0)", "run.run_until(1.0)"),
+    ('["noise=0.01"]', '["noise=0.01", "level=1", "periods=0.1", "frames=1", "settle=1"]'),
+    ('seeds=[0, 1, 2], device="cuda")', 'seeds=[0, 1, 2], device="cpu")'),
 ]
 
 
@@ -35,3 +37,4 @@ def test_readme_tour_runs(tmp_path, monkeypatch):
     assert (tmp_path / "finer.ply").exists()
     stepped, pulse = names["state"].c.numpy(), names["c0"]
     assert np.isfinite(stepped).all() and not np.array_equal(stepped, pulse)
+    assert names["batch"].worlds == 3 and names["result"]["status"] == "done"

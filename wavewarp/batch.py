@@ -39,10 +39,12 @@ def check_batch(ps: list) -> None:
         raise ValueError("a batch needs at least one world")
     first = ps[0]
     for w, p in enumerate(ps[1:], 1):
-        differ = [f.name for f in fields(first) if f.name not in PER_WORLD and getattr(p, f.name) != getattr(first, f.name)]
+        differ = [f.name for f in fields(first)
+                  if f.name not in PER_WORLD and getattr(p, f.name) != getattr(first, f.name)]  # fmt: skip
         if differ:
-            raise ValueError(f"world {w} differs from world 0 in {', '.join(differ)}: the worlds of a batch share every "
-                             f"parameter but {', '.join(PER_WORLD)} (and the seed); run the others in another batch")  # fmt: skip
+            raise ValueError(f"world {w} differs from world 0 in {', '.join(differ)}: the worlds of a batch share "
+                             f"every parameter but {', '.join(PER_WORLD)} (and the seed); run the others in another "
+                             "batch")  # fmt: skip
 
 
 class WalkerBatch(WaveClock):
@@ -89,7 +91,8 @@ class WalkerBatch(WaveClock):
         with wp.ScopedDevice(self.shell.device):
             self._origins = wp.array([w * n + pl.origin_vertex for w, pl in enumerate(placed)], dtype=wp.int32)
             self._trace_row = wp.zeros(self.worlds, dtype=wp.int32)
-            self._trace_rows = wp.zeros((self.steps_per_frame, self.worlds * (TRACE_COLUMNS - 1)), dtype=self.shell.scalar)
+            columns = self.worlds * (TRACE_COLUMNS - 1)
+            self._trace_rows = wp.zeros((self.steps_per_frame, columns), dtype=self.shell.scalar)
         self.coupled = Walking(self.dynamics, self.wave, sensitive=p.sensitive, recorder=self._record_trace_row,
                                ramp=p.ramp)  # fmt: skip
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
@@ -175,7 +178,8 @@ class WalkerBatch(WaveClock):
         return {"time": self.time, "mechanics_steps": self.steps * self.coupled.substeps,
                 "contact_depth_R": placed.depth / self.radius, **self.balance.measurements(w),
                 **arrival_measurements(self.arrival.times(self.wave.dt)[self._slices[w]]),
-                **locomotion(self.traces[w], placed.forward, self.radius, self.rest_heights[w], self.period_kinetic)}  # fmt: skip
+                **locomotion(self.traces[w], placed.forward, self.radius, self.rest_heights[w],
+                             self.period_kinetic)}  # fmt: skip
 
 
 def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print) -> WalkerBatch:

@@ -14,6 +14,10 @@ it: `model.operator(x)` builds the Laplace–Beltrami operator on the rest surfa
 `model.chemistry_solver(operator)` the wave's solver on it, `model.wave(operator, c0=...)` a
 ready-to-run wave stepper (solver, state, time step), `model.mechanics(...)` the shell dynamics'
 solver.
+
+Batched worlds: on a `Mesh.union` of N meshes of one topology the model holds N shells that never
+interact; add_koiter/add_bilayer and add_volume then take one value per world or one for all
+(docs/theory/batches.md).
 """
 
 from __future__ import annotations
