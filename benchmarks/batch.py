@@ -35,7 +35,7 @@ from wavewarp.coupled import Walking  # noqa: E402
 from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.dynamics import ShellDynamics  # noqa: E402
 from wavewarp.initial import gaussian_pulse  # noqa: E402
-from wavewarp.io import write_json, write_png  # noqa: E402
+from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
 from wavewarp.mesh import Mesh, icosphere  # noqa: E402
 from wavewarp.runs import imperfect, mean_edge  # noqa: E402
@@ -176,11 +176,7 @@ def main(argv=None) -> int:
         fitting = [n for n in worlds if n * 20 * 4**level <= args.max_triangles]
         rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks, args.noise)
     result = dict(benchmark="batch", date=date.today().isoformat(), **describe_device(device), peaks=peaks, rows=rows)
-    os.makedirs(args.out, exist_ok=True)
-    stem = os.path.join(args.out, f"batch_{device_tag(device)}")
-    write_json(stem + ".json", result)
-    chart(result, stem + ".png")
-    print(f"wrote {stem}.json, {stem}.png")
+    write_result(result, args.out, f"batch_{device_tag(device)}", chart)
     return 0
 
 

@@ -23,7 +23,7 @@ from datetime import date
 import numpy as np
 
 from wavewarp.device import describe_device, device_tag, resolve_device
-from wavewarp.io import write_json, write_png
+from wavewarp.io import write_png, write_result
 from wavewarp.sweep import SweepSpec, sweep
 
 SCENES = ("sphere-walker", "prism-walker")
@@ -121,10 +121,7 @@ def main(argv=None) -> int:
     scenes = {scene: summary(rows) for scene, rows in zip(args.scenes, tables)}
     result = dict(benchmark="locomotion_ensemble", date=date.today().isoformat(), **described, seeds=args.seeds,
                   noise=args.noise, scenes=scenes)  # fmt: skip
-    stem = os.path.join(args.out, f"locomotion_ensemble_{tag}")
-    write_json(stem + ".json", result)
-    chart(result, stem + ".png")
-    print(f"wrote {stem}.json, {stem}.png")
+    write_result(result, args.out, f"locomotion_ensemble_{tag}", chart)
     return 0
 
 

@@ -35,7 +35,7 @@ from numpy_shell import NumpyShell  # noqa: E402
 from wavewarp.coupled import Walking  # noqa: E402
 from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.dynamics import Ground, ShellDynamics  # noqa: E402
-from wavewarp.io import write_json, write_png  # noqa: E402
+from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
 from wavewarp.mesh import Mesh, icosphere  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
@@ -312,11 +312,7 @@ def main(argv=None) -> int:
                       "steps/s", flush=True)  # fmt: skip
     result = dict(benchmark="speed", date=date.today().isoformat(), **describe_device(device), peaks=peaks,
                   kernels=kernels, steps=steps)  # fmt: skip
-    os.makedirs(args.out, exist_ok=True)
-    stem = os.path.join(args.out, f"speed_{device_tag(device)}")
-    write_json(stem + ".json", result)
-    chart(result, stem + ".png")
-    print(f"wrote {stem}.json, {stem}.png")
+    write_result(result, args.out, f"speed_{device_tag(device)}", chart)
     return 0
 
 

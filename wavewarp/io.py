@@ -115,3 +115,13 @@ def write_png(fig, path, dpi: int = 120) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
+
+
+def write_result(result: dict, out: str, stem: str, chart) -> str:
+    """A benchmark's `result` as OUT/STEM.json and `chart(result, path)` as OUT/STEM.png; returns OUT/STEM."""
+    os.makedirs(out, exist_ok=True)
+    path = os.path.join(out, stem)
+    write_json(path + ".json", result)
+    chart(result, path + ".png")
+    print(f"wrote {path}.json, {path}.png")
+    return path
