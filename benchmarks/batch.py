@@ -12,7 +12,7 @@ strictest world's, so the mechanics substeps per chemistry step grow by up to 2%
 mechanics world-steps/s count them). Per level and N: the batched run's coupled steps per second × N (world-steps/s,
 and × substeps the mechanics world-steps/s); the sequential baseline runs min(N, 4) of the same
 worlds one after another, each as its own single-world run, and reports their aggregate (the same
-for every N: a single run's rate); the ratio of the two; the host seconds to build the batch; and
+for every N: a single run's rate); the ratio of the two; the seconds to set the batch up (tables, settling); and
 the Koiter force kernel alone on the union (its time against the roofline floor of `bench speed`).
 Writes batch_<device>.json and batch_<device>.png.
 """
@@ -113,7 +113,8 @@ def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peak
         counts = koiter_counts(shell)
         floor = max(counts["bytes"] / peaks["bandwidth_bytes_per_s"], counts["flops"] / peaks["flops_per_s"])
         per_world = meshes[0].n_triangles
-        row = dict(level=level, worlds=n, noise_R=noise, triangles_per_world=per_world, triangles=n * per_world, dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
+        row = dict(level=level, worlds=n, noise_R=noise, triangles_per_world=per_world, triangles=n * per_world,
+                   dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
                    world_steps_per_second=n * rate, mechanics_world_steps_per_second=n * rate * walk.substeps,
                    sequential_world_steps_per_second=1 / seconds_per_world_step,
                    speedup_vs_sequential=n * rate * seconds_per_world_step, shell_forces_seconds=forces,
@@ -122,7 +123,7 @@ def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peak
         print(f"level {level} {n:4d} worlds ({row['triangles']:>8d} tri) {dtype}: {row['world_steps_per_second']:9.3e} "
               f"world-steps/s ({row['mechanics_world_steps_per_second']:9.3e} mechanics), x{row['speedup_vs_sequential']:.1f} "
               f"vs sequential; shell forces {forces * 1e3:.3f} ms = {row['shell_forces_times_floor']:.1f}x floor; "
-              f"built in {build:.1f} s", flush=True)  # fmt: skip
+              f"set up (tables, settling) in {build:.1f} s", flush=True)  # fmt: skip
     return rows
 
 
