@@ -19,12 +19,16 @@ def block_add(total: wp.array(dtype=Any), index: int, value: Any):
 
 
 @wp.kernel
-def block_sum_kernel(values: wp.array(dtype=Any), total: wp.array(dtype=Any)):
-    """total[0] += Σ values (zeroed by the caller); launched tiled, one thread block per REDUCTION_BLOCK values."""
-    block = wp.tid()
-    tile = wp.tile_load(values, shape=REDUCTION_BLOCK, offset=block * REDUCTION_BLOCK)  # zero-padded past the end
-    wp.tile_atomic_add(total, wp.tile_sum(tile))
+def world_sum_kernel(values: wp.array(dtype=Any), worlds: int, threads: int, total: wp.array(dtype=Any)):
+    """total[w] += Σ of world w's share of `values` (`worlds` equal blocks; into total[0] where total
+    holds one entry): `threads` per world (whole blocks, no block straddling two worlds), thread t
+    of world w taking its items t, t + threads, ... Zeroed by the caller."""
+    items = values.shape[0] // worlds
+    w = wp.tid() // threads
+    s = type(values[0])(0.0)
+    for i in range(wp.tid() - w * threads, items, threads):
+        s += values[w * items + i]
+    block_add(total, wp.min(w, total.shape[0] - 1), s)
 
 
-declare_overloads(block_sum_kernel, values="scalar[]", total="scalar[]")
-declare_overloads(block_sum_kernel, values="vec3[]", total="vec3[]")
+declare_overloads(world_sum_kernel, values="scalar[]", total="scalar[]")

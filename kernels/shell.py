@@ -463,10 +463,11 @@ def volume_centroid_forces_kernel(
 @wp.kernel
 def volume_energy_kernel(moments: wp.array(dtype=VolumeMoments), vertices: int, target: wp.array(dtype=wp.float64),
                          penalty: wp.array(dtype=wp.float64), energy: wp.array(dtype=wp.float64)):  # fmt: skip
-    """E_V = μV (V - V̄)² of world w (one thread each; `vertices` per world) added to energy[0] (float64)."""
+    """E_V = μV (V - V̄)² of world w (one thread each; `vertices` per world) added to energy[w] (float64;
+    to energy[0], the total, where energy holds one entry)."""
     w = wp.tid()
     d = volume_about_centroid(moments[w], vertices) - target[w]
-    wp.atomic_add(energy, 0, penalty[w] * d * d)
+    wp.atomic_add(energy, wp.min(w, energy.shape[0] - 1), penalty[w] * d * d)
 
 
 @wp.kernel

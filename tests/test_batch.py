@@ -13,6 +13,7 @@ from wavewarp.driver import simulate
 from wavewarp.geometry import patch_tables
 from wavewarp.mesh import Mesh, icosphere
 from wavewarp.parameters import resolve
+from wavewarp.relax import RelaxationError
 from wavewarp.runs import imperfect
 from wavewarp.scenes import sphere_walker as scene
 from wavewarp.self_contact import SelfContact
@@ -159,9 +160,37 @@ def test_batched_shell_parameters_take_one_value_or_one_per_world():
     assert wp.types.types_equal(shell.reference.couplings[0].dtype, wp.float32)
 
 
-def test_quasi_static_relaxation_and_self_contact_refuse_batched_worlds():
+def test_each_world_of_a_batched_relaxation_equals_its_own_relaxation_bit_for_bit():
+    """Nonlinear CG with one line search and one convergence test per world: three noisy spheres with
+    per-world h, AC, AI, μV under per-world concentrations relax to their own shells' equilibria, the
+    same iterations and energies, bit for bit (float64, CPU: every sum in a fixed order)."""
+    meshes = noisy_spheres(3)
+    thickness, AC, AI, mu = [0.05, 0.08, 0.05], [0.3, 0.0, -0.2], [0.0, 0.4, 0.2], [5.0, 0.0, 10.0]
+    c = [np.full(m.n_vertices, value) for m, value in zip(meshes, (0.5, 0.8, 0.3))]
+    batch = Shell(Mesh.union(meshes), thickness, 1.0, AC=AC, AI=AI, volume_penalty=mu, dtype="float64", device="cpu")
+    x = batch.relax(batch.mesh.vertices, np.concatenate(c), method="ncg")
+    histories = batch.relax_history
+    n = meshes[0].n_vertices
+    for w, mesh in enumerate(meshes):
+        single = Shell(mesh, thickness[w], 1.0, AC=AC[w], AI=AI[w], volume_penalty=mu[w], dtype="float64", device="cpu")
+        np.testing.assert_array_equal(x[w * n:(w + 1) * n], single.relax(mesh.vertices, c[w], method="ncg"))
+        assert histories[w] == single.relax_history and len(histories[w]) > 10
+
+
+def test_a_batched_relaxation_names_the_worlds_that_did_not_converge():
+    """A budget too small for the contracting world: the error names it; the world at rest converged."""
+    meshes = noisy_spheres(2)
+    batch = Shell(Mesh.union(meshes), 0.05, 1.0, AC=[0.0, 0.5], dtype="float64", device="cpu")
+    with pytest.raises(RelaxationError, match=r"in world 1 \(the others converged\)") as stopped:
+        batch.relax(batch.mesh.vertices, 1.0, max_iterations=5)
+    assert stopped.value.worlds == [1]
+    n = meshes[0].n_vertices
+    np.testing.assert_array_equal(stopped.value.x[:n], meshes[0].vertices)  # at rest under AC = 0: no step taken
+    with pytest.raises(ValueError, match="batched worlds relax by nonlinear CG"):
+        batch.relax(batch.mesh.vertices, method="newton")
+
+
+def test_self_contact_refuses_batched_worlds():
     shell = Shell(Mesh.union(noisy_spheres(2)), 0.1, 1.0, device="cpu", dtype="float64")
-    with pytest.raises(ValueError, match="relax each world's own Shell"):
-        shell.relax(shell.mesh.vertices)
     with pytest.raises(ValueError, match="would touch each other"):
         SelfContact(shell)

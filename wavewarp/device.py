@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from . import kernels
-from .kernels.reduce import REDUCTION_BLOCK, block_sum_kernel
+from .kernels.reduce import REDUCTION_BLOCK, world_sum_kernel
 
 DTYPES = {"float32": wp.float32, "float64": wp.float64}
 # atomic updates one thread may record in deterministic mode, per kernel module: a patch scatters 18
@@ -131,11 +131,14 @@ def reduction_threads(n: int, deterministic=None) -> int:
     return -(-n // REDUCTION_BLOCK) * REDUCTION_BLOCK
 
 
-def block_sum(values: wp.array, total: wp.array) -> None:
-    """total[0] = Σ values on the values' device: a block reduction (capturable in a CUDA graph)."""
+def world_sums(values: wp.array, total: wp.array, worlds: int = 1, deterministic=None) -> None:
+    """total[w] = Σ of world w's share of `values` (`worlds` equal blocks; total[0] = Σ values where
+    total holds one entry), on the values' device: a block reduction per world (capturable in a
+    CUDA graph), one block per world when deterministic."""
     total.zero_()
-    wp.launch_tiled(block_sum_kernel, dim=[reduction_threads(len(values)) // REDUCTION_BLOCK], inputs=[values],
-                    outputs=[total], block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
+    threads = reduction_threads(len(values) // worlds, deterministic)
+    wp.launch(world_sum_kernel, dim=threads * worlds, inputs=[values, worlds, threads], outputs=[total],
+              block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
 
 
 def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool) -> None:

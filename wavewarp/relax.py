@@ -32,6 +32,7 @@ from .kernels.relax import (
     TOL,
     accept_kernel,
     beta_kernel,
+    continue_kernel,
     direction_kernel,
     iteration_kernel,
     line_search_kernel,
@@ -57,29 +58,35 @@ class RelaxationError(RuntimeError):
     there, `.round_off` whether it stopped because no lower energy could be resolved, `.iterations`
     how many it took."""
 
-    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False, iterations: int = 0):
+    def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False, iterations: int = 0,
+                 worlds=None):  # fmt: skip
         super().__init__(message)
         self.residual = residual
         self.x = x
         self.round_off = round_off
         self.iterations = iterations
+        self.worlds = worlds  # batched worlds: those that did not converge (the others did)
 
 
 def _inverse_stiffness(shell) -> np.ndarray:
-    """1/k with k = (Y h / ℓ̄² + Y h³ / ℓ̄⁴) Ā, Ā the mean control area per vertex.
+    """1/k with k = (Y h / ℓ̄² + Y h³ / ℓ̄⁴) Ā, Ā the mean control area per vertex (each world's own).
 
-    One value for all vertices: it sets the step scale without giving the search direction a
-    net translation or rotation (internal forces have none), so rigid modes cannot stall it.
+    One value for all vertices of a world: it sets the step scale without giving the search
+    direction a net translation or rotation (internal forces have none), so rigid modes cannot stall it.
     """
-    mesh, ell = shell.mesh, shell.edge_length
+    mesh = shell.mesh
     a, b, c = (mesh.vertices[mesh.triangles[:, k]] for k in range(3))
-    area_per_vertex = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() / mesh.n_vertices
-    stiffness = shell.young * shell.thickness * (1 / ell**2 + shell.thickness**2 / ell**4) * area_per_vertex
-    return np.full(mesh.n_vertices, 1.0 / stiffness)
+    areas = np.linalg.norm(np.cross(b - a, c - a), axis=1).reshape(shell.worlds, -1)
+    inverse = []
+    for area, young, h, ell in zip(areas, shell._young, shell._thickness, shell.world_edge_lengths):
+        area_per_vertex = 0.5 * area.sum() / mesh.vertices_per_world
+        inverse.append(1.0 / (float(young) * float(h) * (1 / ell**2 + float(h) ** 2 / ell**4) * area_per_vertex))
+    return np.repeat(inverse, mesh.vertices_per_world)
 
 
 class Relaxation:
-    """Preconditioned nonlinear CG (Polak–Ribière+) for one shell, resident on its device.
+    """Preconditioned nonlinear CG (Polak–Ribière+) for one shell, resident on its device (batched
+    worlds: one line search and one convergence test per world, in the same launches).
 
     Vectors and the scalar state of the line search live on the device; one loop pass evaluates
     one trial point and, when the search accepts it, updates the CG direction (kernels/relax.py).
@@ -89,17 +96,17 @@ class Relaxation:
 
     def __init__(self, shell):
         self.shell = shell
-        n, vec3, scalar = shell.mesh.n_vertices, shell.vec3, shell.scalar
+        n, worlds, vec3, scalar = shell.mesh.n_vertices, shell.worlds, shell.vec3, shell.scalar
         with wp.ScopedDevice(shell.device):
             self.x, self.trial = wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3)
             self.forces, self.trial_forces = wp.zeros(n, dtype=vec3), wp.zeros(n, dtype=vec3)
             self.s, self.s_old, self.direction = (wp.zeros(n, dtype=vec3) for _ in range(3))
             self.inverse_stiffness = wp.array(_inverse_stiffness(shell).astype(shell._real), dtype=scalar)
-            self.energy, self.trial_energy = wp.zeros(1, dtype=wp.float64), wp.zeros(1, dtype=wp.float64)
-            self.sums = wp.zeros(3, dtype=scalar)
-            self.largest, self.dot = wp.zeros(1, dtype=scalar), wp.zeros(1, dtype=scalar)
-            self.search = wp.zeros(SEARCH_SIZE, dtype=wp.float64)
-            self.flags, self.condition = wp.zeros(FLAGS_SIZE, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
+            self.energy, self.trial_energy = wp.zeros(worlds, dtype=wp.float64), wp.zeros(worlds, dtype=wp.float64)
+            self.sums = wp.zeros(3 * worlds, dtype=scalar)
+            self.largest, self.dot = wp.zeros(worlds, dtype=scalar), wp.zeros(worlds, dtype=scalar)
+            self.search = wp.zeros(SEARCH_SIZE * worlds, dtype=wp.float64)
+            self.flags, self.condition = wp.zeros(FLAGS_SIZE * worlds, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)
         self.history = None  # E after each accepted step, capacity max_iterations + 1
         self.forget_graphs()
         shell.listen(self.forget_graphs)  # a new V̄ or term: the captured loop is captured anew
@@ -112,13 +119,16 @@ class Relaxation:
         `out` (a device array, may be x), writes them there and returns None; after a STALE stop it
         returns None and writes nothing. `resume` goes on from a STALE stop with the CG state,
         iteration count and budget as they were."""
-        shell = self.shell
+        shell, worlds = self.shell, self.shell.worlds
         if not resume:
-            if self.history is None or len(self.history) < max_iterations + 1:
-                self.history = wp.zeros(max_iterations + 1, dtype=wp.float64, device=shell.device)
+            if self.history is None or len(self.history) != (max_iterations + 1) * worlds:
+                self.history = wp.zeros((max_iterations + 1) * worlds, dtype=wp.float64, device=shell.device)
                 self.forget_graphs()  # the captured loop writes the history array it was captured with
-            parameters = [tol, max_iterations, shell.force_scale(), ENERGY_NOISE[shell.scalar]]
-            self.search[TOL:].assign(np.array(parameters, dtype=np.float64))
+            search = self.search.numpy().reshape(worlds, SEARCH_SIZE)
+            search[:, TOL:] = np.column_stack([np.full(worlds, tol), np.full(worlds, max_iterations),
+                                               np.broadcast_to(shell.force_scale(), worlds),
+                                               np.full(worlds, ENERGY_NOISE[shell.scalar])])  # fmt: skip
+            self.search.assign(search.ravel())
             wp.copy(self.x, x)
         solve, graphs = (self._resume, self._resume_graphs) if resume else (self._solve, self._graphs)
         if callback is not None:
@@ -155,30 +165,31 @@ class Relaxation:
         self.largest.zero_()
         wp.launch(start_kernel, dim=n, inputs=[self.forces, self.inverse_stiffness],
                   outputs=[self.s, self.direction, self.sums, self.largest])  # fmt: skip
-        wp.launch(start_search_kernel, dim=1, inputs=[self.energy, self.sums, self.largest],
-                  outputs=[self.search, self.flags, self.history, self.condition])  # fmt: skip
+        wp.launch(start_search_kernel, dim=shell.worlds, inputs=[self.energy, self.sums, self.largest],
+                  outputs=[self.search, self.flags, self.history])  # fmt: skip
+        wp.launch(continue_kernel, dim=1, inputs=[self.flags], outputs=[self.condition])
 
     def _pass(self) -> None:
         """Evaluate x + α d, let the line search decide, and after an accepted step update d."""
-        shell, n = self.shell, self.shell.mesh.n_vertices
+        shell, n, worlds = self.shell, self.shell.mesh.n_vertices, self.shell.worlds
         contact = shell.self_contact
         wp.launch(trial_kernel, dim=n, inputs=[self.x, self.direction, self.search], outputs=[self.trial, self.dot, self.flags])
         shell.forces_device(self.trial, self.trial_forces, self.trial_energy)
         if contact is not None:  # a trial half the skin away is refused; once a quarter away, a new search
             contact.mark_moved(self.flags, FAR_TRIAL, OUTSIDE_SKIN)
         wp.launch(slope_kernel, dim=n, inputs=[self.trial_forces, self.direction], outputs=[self.dot])
-        wp.launch(line_search_kernel, dim=1, inputs=[self.trial_energy, self.dot],
-                  outputs=[self.search, self.flags, self.condition])  # fmt: skip
+        wp.launch(line_search_kernel, dim=worlds, inputs=[self.trial_energy, self.dot], outputs=[self.search, self.flags])
         self.sums.zero_()
         self.largest.zero_()
         wp.launch(accept_kernel, dim=n, inputs=[self.flags, self.trial, self.trial_forces, self.inverse_stiffness],
                   outputs=[self.x, self.forces, self.s, self.s_old, self.sums, self.largest])  # fmt: skip
-        wp.launch(beta_kernel, dim=1, inputs=[self.flags, self.sums], outputs=[self.search])
+        wp.launch(beta_kernel, dim=worlds, inputs=[self.flags, self.sums], outputs=[self.search])
         wp.launch(direction_kernel, dim=n, inputs=[self.flags, self.s, self.forces, self.search],
                   outputs=[self.direction, self.sums])  # fmt: skip
-        wp.launch(iteration_kernel, dim=1, inputs=[self.flags, self.sums, self.largest, self.search],
-                  outputs=[self.history, self.condition])  # fmt: skip
+        wp.launch(iteration_kernel, dim=worlds, inputs=[self.flags, self.sums, self.largest, self.search],
+                  outputs=[self.history])  # fmt: skip
         wp.launch(restart_kernel, dim=n, inputs=[self.flags, self.s], outputs=[self.direction])
+        wp.launch(continue_kernel, dim=1, inputs=[self.flags], outputs=[self.condition])
 
     def _loop(self, callback, announce: bool = True) -> None:
         """The loop driven from the host: callback(iteration, E, residual) at the start and after each step."""
@@ -193,25 +204,33 @@ class Relaxation:
                     callback(int(flags[ITERATION]), search[ENERGY], search[RESIDUAL])
 
     def _result(self, tol: float, out):
-        flags, search = self.flags.numpy(), self.search.numpy()
-        iterations, status, residual = int(flags[ITERATION]), int(flags[STATUS]), float(search[RESIDUAL])
-        self.shell.relax_history = self.history.numpy()[: iterations + 1].tolist()
-        self.status = status
-        if status == STALE:
+        worlds = self.shell.worlds
+        flags, search = self.flags.numpy().reshape(worlds, -1), self.search.numpy().reshape(worlds, -1)
+        iterations, statuses, residuals = flags[:, ITERATION], flags[:, STATUS], search[:, RESIDUAL]
+        history = self.history.numpy().reshape(worlds, -1)
+        histories = [history[w, : iterations[w] + 1].tolist() for w in range(worlds)]
+        self.shell.relax_history = histories[0] if worlds == 1 else histories
+        self.status = int(statuses[0])
+        self.statuses = statuses
+        if worlds == 1 and self.status == STALE:
             return None  # relax() searches again and resumes; only the final round's result is read
-        if status == CONVERGED:
+        if np.all(statuses == CONVERGED):
             if out is None:
                 return self.x.numpy().astype(np.float64)
             wp.copy(out, self.x)
             return None
         x = self.x.numpy().astype(np.float64)
-        round_off = status != BUDGET_SPENT
+        failed = np.flatnonzero(statuses != CONVERGED)
+        w = int(failed[np.argmax(residuals[failed])])
+        residual, round_off = float(residuals[w]), bool(np.all(statuses[failed] != BUDGET_SPENT))
+        where = "" if worlds == 1 else f"in world{'s' * (len(failed) > 1)} {', '.join(map(str, failed))} (the others converged); world {w} "
         raise RelaxationError(
-            f"relax stopped after {iterations} iterations at residual max|F|/(Y h ℓ̄) = {residual:.3g}, "
+            f"relax stopped {where}after {iterations[w]} iterations at residual max|F|/(Y h ℓ̄) = {residual:.3g}, "
             f"{residual / tol:.3g}× the tolerance {tol:g}"
             + (" (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
                if round_off else "; raise max_iterations or tol"),  # fmt: skip
-            residual, x, round_off=round_off, iterations=iterations,
+            residual, x, round_off=round_off, iterations=int(iterations[w]),
+            worlds=None if worlds == 1 else failed.tolist(),
         )  # fmt: skip
 
 
@@ -232,10 +251,12 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
     ROUND_OFF_SLACK × tol away (nearer is the dtype's floor: it raises), not with self-contact.
     """
     checked_method(method)
-    if shell.worlds > 1:
-        raise ValueError(f"quasi-static relaxation steps one world: this shell holds {shell.worlds} batched worlds, "
-                         "whose line search and convergence would be shared; relax each world's own Shell "
-                         "(batched worlds run the walkers' dynamics)")  # fmt: skip
+    if shell.worlds > 1:  # nonlinear CG per world; the Newton finish works on one world's Hessian
+        if method == "newton" or callback is not None:
+            raise ValueError(f"batched worlds relax by nonlinear CG without a callback (method 'ncg' or 'auto'), got "
+                             f"method={method!r}{' and a callback' if callback is not None else ''}; relax one "
+                             "world's own Shell for a Newton finish or a callback")  # fmt: skip
+        return _conjugate_gradients(shell, x, tol, max_iterations, None, out)
     if method == "newton":
         return _newton(shell, x.numpy().astype(np.float64), tol, newton_steps, callback, out, [], 0)
     try:

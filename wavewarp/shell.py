@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 from .checks import finite, plain, positive
-from .device import block_sum, deterministic_default, mat22, numpy_dtype, reduction_threads
+from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.shell import (
@@ -168,7 +168,9 @@ class Shell:
                 self._jets = wp.zeros((n_q, 6), dtype=self.vec3)
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
-        self.edge_length = float(np.mean(np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)))
+        lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
+        self.edge_length = float(np.mean(lengths))  # ℓ̄ over every world
+        self.world_edge_lengths = np.array([np.mean(world) for world in np.split(lengths, worlds)])  # each world's
         self._c_host = None
         self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
         self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
@@ -251,16 +253,14 @@ class Shell:
         return float(volumes[0]) if self.worlds == 1 else volumes
 
     def _sum(self, values: wp.array, total: wp.array, differentiable: bool) -> None:
-        """total[0] = Σ values: a block reduction (its blocks add atomically, in any order), Warp's
-        fixed-order tree reduction for deterministic shells, or same-address atomics where Warp's
-        tape must follow."""
+        """total[w] = Σ of world w's values (total[0] = Σ values where total holds one entry): block
+        reductions per world (their blocks add atomically, in any order; one block per world for
+        deterministic shells), or same-address atomics into total[0] where Warp's tape must follow."""
         if differentiable:
             total.zero_()
             wp.launch(sum_kernel, dim=len(values), inputs=[values], outputs=[total], device=self.device)
-        elif self.deterministic:
-            wp.utils.array_sum(values, out=total)
         else:
-            block_sum(values, total)
+            world_sums(values, total, self.worlds, self.deterministic)
 
     def _launch_volume(self, x: wp.array, differentiable: bool) -> None:
         """The volume moments [S, V₀, Σx] (kernels/shell.py `volume_kernel`) into self._moments: per-item
@@ -297,7 +297,8 @@ class Shell:
                       outputs=[energy], device=self.device)  # fmt: skip
 
     def forces_device(self, x: wp.array, forces: wp.array, energy: wp.array | None = None) -> None:
-        """forces = -∂E/∂x and, when given, energy[0] = E at the current reference (both overwritten).
+        """forces = -∂E/∂x and, when given, energy = E at the current reference (both overwritten): energy[0]
+        the total, or, for an array of one entry per batched world, each world's energy.
 
         No host round-trip: capturable in a CUDA graph (dynamics).
         """
@@ -397,9 +398,10 @@ class Shell:
         """Volume enclosed by the limit surface at positions x."""
         return self._volume_of(self.tables.positions(checked_positions(x, self.mesh.n_vertices)))
 
-    def force_scale(self) -> float:
-        """Y h ℓ̄: the force on a vertex from a unit strain over one mean control edge ℓ̄."""
-        return self.young * self.thickness * self.edge_length
+    def force_scale(self):
+        """Y h ℓ̄: the force on a vertex from a unit strain over one mean control edge ℓ̄ (one per batched
+        world where they differ)."""
+        return world_value(self._young * self._thickness * self.world_edge_lengths)
 
     def relax(self, x0, c=0.0, tol=None, max_iterations=20000, callback=None, method="auto",
               newton_steps=NEWTON_STEPS) -> np.ndarray:  # fmt: skip
@@ -411,7 +413,9 @@ class Shell:
         `max_iterations`); "newton", Levenberg–Marquardt Newton steps on the sparse Hessian (at
         most `newton_steps`); "auto", CG, and Newton from where CG stopped if it spent its
         budget (docs/theory/shell.md). The energy falls monotonically. Raises RelaxationError saying how
-        far it got when it does not converge.
+        far it got when it does not converge. Batched worlds relax together by nonlinear CG, each with
+        its own line search and convergence test ("auto" has no Newton finish there); the error's
+        `.worlds` names those that did not converge.
         """
         if tol is None:
             tol = 1e-5 if self.scalar == wp.float32 else 1e-9
