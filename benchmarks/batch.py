@@ -14,7 +14,13 @@ and × substeps the mechanics world-steps/s); the sequential baseline runs min(N
 worlds one after another, each as its own single-world run, and reports their aggregate (the same
 for every N: a single run's rate); the ratio of the two; the seconds to set the batch up (tables, settling); and
 the Koiter force kernel alone on the union (its time against the roofline floor of `bench speed`).
-Writes batch_<device>.json and batch_<device>.png.
+
+The quasi-static rows (`--relaxations`): N noisy spheres (R = 10, h = 0.05 R, μV = 10 Yh/R⁴, seeded
+noise per world) with their own AC (0.1 … 0.3) relax from rest under c = 0.5 by nonlinear CG, each
+world with its own line search and convergence (`Shell.relax` on the union), against the same
+relaxations one after another; the batch runs until its slowest world converges, so its CG passes
+are the largest world's count. Timed on the second relaxation of each shell (the first compiles and
+captures the loop). Writes batch_<device>.json and batch_<device>.png.
 """
 
 from __future__ import annotations
@@ -113,17 +119,51 @@ def level_rows(level: int, worlds: list, device, dtype: str, budget: float, peak
         counts = koiter_counts(shell)
         floor = max(counts["bytes"] / peaks["bandwidth_bytes_per_s"], counts["flops"] / peaks["flops_per_s"])
         per_world = meshes[0].n_triangles
-        row = dict(level=level, worlds=n, noise_R=noise, triangles_per_world=per_world, triangles=n * per_world,
-                   dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
+        row = dict(kind="walker", level=level, worlds=n, noise_R=noise, triangles_per_world=per_world,
+                   triangles=n * per_world, dtype=dtype, substeps=walk.substeps, build_seconds=build, steps_per_second=rate,
                    world_steps_per_second=n * rate, mechanics_world_steps_per_second=n * rate * walk.substeps,
                    sequential_world_steps_per_second=1 / seconds_per_world_step,
                    speedup_vs_sequential=n * rate * seconds_per_world_step, shell_forces_seconds=forces,
                    shell_forces_times_floor=forces / floor)  # fmt: skip
         rows.append(row)
         print(f"level {level} {n:4d} worlds ({row['triangles']:>8d} tri) {dtype}: {row['world_steps_per_second']:9.3e} "
-              f"world-steps/s ({row['mechanics_world_steps_per_second']:9.3e} mechanics), x{row['speedup_vs_sequential']:.1f} "
-              f"vs sequential; shell forces {forces * 1e3:.3f} ms = {row['shell_forces_times_floor']:.1f}x floor; "
+              f"world-steps/s ({row['mechanics_world_steps_per_second']:9.3e} mechanics), "
+              f"x{row['speedup_vs_sequential']:.1f} vs sequential; shell forces {forces * 1e3:.3f} ms = {row['shell_forces_times_floor']:.1f}x floor; "
               f"set up (tables, settling) in {build:.1f} s", flush=True)  # fmt: skip
+    return rows
+
+
+def relax_seconds(meshes: list, couplings: list, device, dtype: str) -> tuple:
+    """(seconds, CG iterations per world) of relaxing `meshes` as one batch from rest under c = 0.5."""
+    mesh = Mesh.union(meshes) if len(meshes) > 1 else meshes[0]
+    shell = Shell(mesh, 0.5, 1.0, AC=couplings, volume_penalty=10.0 * 0.5 / 10.0**4, device=device, dtype=dtype)
+    shell.relax(mesh.vertices, 0.5, method="ncg")  # compiles and captures
+    start = time.perf_counter()
+    shell.relax(mesh.vertices, 0.5, method="ncg")
+    seconds = time.perf_counter() - start
+    histories = shell.relax_history if len(meshes) > 1 else [shell.relax_history]
+    return seconds, [len(history) - 1 for history in histories]
+
+
+def relaxation_rows(level: int, worlds: list, device, dtype: str, noise: float) -> list:
+    sphere = icosphere(10.0, level)
+    meshes = [imperfect(sphere, noise * 10.0, seed) for seed in range(max(worlds))]
+    couplings = list(np.linspace(0.1, 0.3, max(worlds)))
+    alone = [relax_seconds([meshes[w]], [couplings[w]], device, dtype)[0] for w in range(min(4, max(worlds)))]
+    seconds_per_world = float(np.mean(alone))
+    rows = []
+    for n in worlds:
+        seconds, iterations = relax_seconds(meshes[:n], couplings[:n], device, dtype)
+        row = dict(kind="relaxation", level=level, worlds=n, noise_R=noise, triangles_per_world=sphere.n_triangles,
+                   triangles=n * sphere.n_triangles, dtype=dtype, seconds=seconds,
+                   world_relaxations_per_second=n / seconds,
+                   sequential_world_relaxations_per_second=1 / seconds_per_world,
+                   speedup_vs_sequential=n * seconds_per_world / seconds, iterations_max=max(iterations),
+                   iterations_mean=float(np.mean(iterations)))  # fmt: skip
+        rows.append(row)
+        print(f"level {level} {n:4d} worlds relaxing ({row['triangles']:>8d} tri) {dtype}: {n / seconds:9.3e} "
+              f"world-relaxations/s, x{row['speedup_vs_sequential']:.1f} vs sequential; CG iterations max "
+              f"{row['iterations_max']}, mean {row['iterations_mean']:.0f}", flush=True)  # fmt: skip
     return rows
 
 
@@ -134,15 +174,21 @@ def chart(result: dict, path: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
-    for k, level in enumerate(sorted({r["level"] for r in result["rows"]})):
-        rows = [r for r in result["rows"] if r["level"] == level]
+    walkers = [r for r in result["rows"] if r.get("kind", "walker") == "walker"]
+    for k, level in enumerate(sorted({r["level"] for r in walkers})):
+        rows = [r for r in walkers if r["level"] == level]
         label = f"{rows[0]['triangles_per_world']:,} triangles per world"
         left.loglog([r["worlds"] for r in rows], [r["mechanics_world_steps_per_second"] for r in rows], "o-",
                     color=f"C{k}", label=f"batched, {label}")  # fmt: skip
         left.loglog([r["worlds"] for r in rows], [r["sequential_world_steps_per_second"] * r["substeps"] for r in rows],
                     "s--", color=f"C{k}", label=f"one after another, {label}")  # fmt: skip
         right.semilogx([r["worlds"] for r in rows], [r["speedup_vs_sequential"] for r in rows], "o-", color=f"C{k}",
-                       label=label)  # fmt: skip
+                       label=f"walkers, {label}")  # fmt: skip
+    relaxations = [r for r in result["rows"] if r.get("kind") == "relaxation"]
+    for k, level in enumerate(sorted({r["level"] for r in relaxations})):
+        rows = [r for r in relaxations if r["level"] == level]
+        right.semilogx([r["worlds"] for r in rows], [r["speedup_vs_sequential"] for r in rows], "^:", color=f"C{k + 2}",
+                       label=f"relaxations, {rows[0]['triangles_per_world']:,} triangles per world")  # fmt: skip
     left.set_xlabel("worlds N")
     left.set_ylabel("mechanics world-steps per second")
     left.set_title(f"sphere walkers, {result['device_name']}")
@@ -166,6 +212,8 @@ def main(argv=None) -> int:
     parser.add_argument("--noise", type=float, default=0.01, help="rest-shape noise per world / R (seeded)")
     parser.add_argument("--budget", type=float, default=2.0, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
+    parser.add_argument("--relaxations", action="store_true", help="also the quasi-static rows (batched relaxations)")
+    parser.add_argument("--no-walkers", action="store_true", help="skip the walker rows")
     parser.add_argument("--quick", action="store_true", help="level 1, 1 and 3 worlds, short timings (smoke test)")
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
@@ -175,7 +223,10 @@ def main(argv=None) -> int:
     rows = []
     for level in levels:
         fitting = [n for n in worlds if n * 20 * 4**level <= args.max_triangles]
-        rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks, args.noise)
+        if not args.no_walkers:
+            rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks, args.noise)
+        if args.relaxations or args.quick:
+            rows += relaxation_rows(level, fitting, device.alias, args.dtype, args.noise)
     result = dict(benchmark="batch", date=date.today().isoformat(), **describe_device(device), peaks=peaks, rows=rows)
     write_result(result, args.out, f"batch_{device_tag(device)}", chart)
     return 0

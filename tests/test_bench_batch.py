@@ -12,8 +12,14 @@ def test_bench_batch_quick_writes_json_and_chart(tmp_path):
     assert cli(["bench", "batch", "--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "batch_cpu.json").read_text())
     assert (tmp_path / "batch_cpu.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    rows = result["rows"]
+    rows = [r for r in result["rows"] if r["kind"] == "walker"]
     assert [r["worlds"] for r in rows] == [1, 3] and len({r["substeps"] for r in rows}) == 1  # one mechanics step
+    relaxations = [r for r in result["rows"] if r["kind"] == "relaxation"]
+    assert [r["worlds"] for r in relaxations] == [1, 3]
+    for row in relaxations:  # the batch runs until its slowest world converges
+        assert row["iterations_max"] >= row["iterations_mean"] > 0
+        assert row["speedup_vs_sequential"] == pytest.approx(row["world_relaxations_per_second"]
+                                                             / row["sequential_world_relaxations_per_second"])  # fmt: skip
     for row in rows:
         assert row["triangles"] == row["worlds"] * row["triangles_per_world"] == row["worlds"] * 80
         assert row["world_steps_per_second"] == pytest.approx(row["worlds"] * row["steps_per_second"])
