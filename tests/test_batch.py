@@ -91,15 +91,14 @@ def test_each_world_of_a_batched_shell_has_its_own_shells_forces_energy_and_volu
 def quick_worlds():
     base = resolve(scene.Parameters, {"level": 1, "periods": 0.1, "frames": 2, "settle": 1.0, "dtype": "float64",
                                       "noise": 0.01})  # fmt: skip
-    return [replace(base, AC=0.1), replace(base, AC=0.2, mirror=True, mu_v=0.0),
-            replace(base, AC=0.0, young=250.0, thickness=2.5)]  # fmt: skip
+    return [replace(base, AC=0.1), replace(base, AC=0.2, mirror=True, mu_v=0.0, young=250.0, thickness=2.5)]
 
 
 def test_each_world_of_a_walker_batch_equals_its_single_run_bit_for_bit(deterministic, device):
-    """Three sphere walkers differing in AC, Y, h, μV, the wave's side and the noise seed: the batch's
+    """Two sphere walkers differing in AC, Y, h, μV, the wave's side and the noise seed: the batch's
     positions, concentrations, trace and measurements of each world are those of its own WalkerRun
     (which settles with the batch's mechanics step: the worlds share the strictest)."""
-    ps, seeds = quick_worlds(), [0, 1, 2]
+    ps, seeds = quick_worlds(), [0, 1]
     batch = scene.build_batch(ps, seeds=seeds, device=device, report=lambda message: None)
     results = batch.run()
     x, c, n = batch.dynamics.positions(), batch.wave.concentration(), batch.vertices
@@ -114,13 +113,13 @@ def test_each_world_of_a_walker_batch_equals_its_single_run_bit_for_bit(determin
         np.testing.assert_array_equal(np.unique(batch.traces[w], axis=0), np.unique(run.trace, axis=0))
         assert results[w]["status"] == "done" and results[w]["frames"] == run.frames + 1
         assert results[w]["measurements"] == outcome.measurements
-    assert len({tuple(batch.traces[w][-1, 2:5]) for w in range(3)}) == 3  # the worlds did differ
+    assert len({tuple(batch.traces[w][-1, 2:5]) for w in range(2)}) == 2  # the worlds did differ
 
 
 def test_a_world_that_blows_up_stops_alone(deterministic, device):
     """A NaN put into one world's velocities after the first frame stops that world at the chunk's start
     (its state finite, frozen) and reports it; the other worlds end as in a batch without the NaN."""
-    ps, seeds = quick_worlds()[:2], [0, 1]
+    ps, seeds = quick_worlds(), [0, 1]
     clean = scene.build_batch(ps, seeds=seeds, device=device, report=lambda message: None)
     clean.run()
     batch = scene.build_batch(ps, seeds=seeds, device=device, report=lambda message: None)
