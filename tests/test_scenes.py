@@ -244,6 +244,7 @@ def test_interrupt_or_solver_failure_keeps_the_frames_written(stop, code, tmp_pa
         assert "; kept the 2 frames before it" in err
 
 
+@pytest.mark.slow
 def test_oocyte_wave_is_rotationally_symmetric_at_constant_speed(tmp_path, capsys):
     """docs/theory/scenes.md / Fig. 1c: arrival times against rest arc length on θ in [π/4, 3π/4] lie on one line
     (constant speed ≈ γ: the wave moves at γ relative to the material), and within each latitude
@@ -262,6 +263,7 @@ def test_oocyte_wave_is_rotationally_symmetric_at_constant_speed(tmp_path, capsy
     assert result["shape_asymmetry"] < 0.01 and result["axisymmetric_until"] == pytest.approx(math.pi * 5)
 
 
+@pytest.mark.slow
 def test_ascidian_shell_stays_axisymmetric_and_ends_before_the_focus(tmp_path, capsys):
     """docs/theory/scenes.md / Fig. 1a: the ascidian's strong contraction (AC = 1.5, AI = 1.6) keeps the shell
     rotationally symmetric while the paper's pulse (σ² = 2/R², R/7 wide) crosses it, the chemical
