@@ -13,6 +13,7 @@ import subprocess
 import sys
 import time
 
+import h5py
 import numpy as np
 import pytest
 import warp as wp
@@ -92,9 +93,26 @@ def test_a_walker_sweep_runs_each_batch_as_one_batched_run(tmp_path):
         assert result["batch"]["worlds"] == 2
         assert result["parameters"]["AC"] == float(result["values"]["AC"])
     assert {r["values"]["sensitive"] for r in results.values() if r["batch"]["world"] == 0} == {"true", "false"}
-    with pytest.raises(ValueError, match="use --batch 1 with --h5"):
-        sweep(SweepSpec("sphere-walker", grid={"AC": ["0.1", "0.2"]}, h5=True), str(tmp_path / "h5"), batch=2,
-              executor=CountingExecutor())  # fmt: skip
+
+
+def test_a_batched_walker_sweep_keeps_each_points_trajectory(tmp_path):
+    """--h5 with --batch: each world's frames in its point's HDF5 file, as many as its result counts, its
+    measurements stored with it; the worlds' trajectories differ (their AC does)."""
+    fixed = ("level=1", "periods=0.1", "frames=2", "settle=1", "dtype=float64")
+    spec = SweepSpec("sphere-walker", grid={"AC": ["0.1", "0.3"]}, fixed=fixed, device="cpu", h5=True)
+    sweep(spec, str(tmp_path), executor=CountingExecutor(), batch=2)
+    last = []
+    for point in grid_points(spec):
+        with open(tmp_path / "points" / f"{point.name}.json") as f:
+            result = json.load(f)
+        with h5py.File(tmp_path / "points" / f"{point.name}.h5", "r") as trajectory:
+            positions = trajectory["frames"]["positions"][:]
+            assert len(positions) == result["frames"] == 3 and np.isfinite(positions).all()
+            assert json.loads(trajectory.attrs["parameters"])["AC"] == float(result["values"]["AC"])
+            assert trajectory["frames"]["trace"].shape[2] == 8
+            assert json.loads(trajectory.attrs["measurements"]) == result["measurements"]
+        last.append(positions[-1])
+    assert not np.array_equal(last[0], last[1])
 
 
 def test_bad_points_are_refused_before_anything_runs(tmp_path):

@@ -13,6 +13,7 @@ chunk it failed in and reported; the others go on.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import fields, replace
 
 import numpy as np
@@ -100,6 +101,11 @@ class WalkerBatch(WaveClock):
                           "substeps": self.coupled.substeps, "period_kinetic": self.period_kinetic}
                          for q, width in zip(ps, self.widths)]  # fmt: skip
         self.traces = [self._sample(w)[None] for w in range(self.worlds)]  # every chemistry step, as WalkerRun.trace
+        self._frame_traces = [np.repeat(trace, self.steps_per_frame, axis=0) for trace in self.traces]  # the last frame's
+        n = self.vertices
+        self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
+                       "reaction_amount": (), "reaction_per_vertex": (n,), "first_arrival": (n,),
+                       "trace": (self.steps_per_frame, TRACE_COLUMNS)}  # fmt: skip  # each world's, as WalkerRun's
 
     def _pulse(self, placed, x, width: float, rule: str, device) -> np.ndarray:
         """World's initial c: the Gaussian on its own operator, exactly as its single run makes it."""
@@ -138,8 +144,18 @@ class WalkerBatch(WaveClock):
         width = TRACE_COLUMNS - 1
         for w in range(self.worlds):
             kept = times <= self.stopped[w].time + 1e-9 * self.wave.dt if w in self.stopped else slice(None)
-            block = np.column_stack([times, rows[:, w * width:(w + 1) * width]])[kept]
-            self.traces[w] = np.concatenate([self.traces[w], block])
+            self._frame_traces[w] = np.column_stack([times, rows[:, w * width:(w + 1) * width]])
+            self.traces[w] = np.concatenate([self.traces[w], self._frame_traces[w][kept]])
+
+    def world_frames(self) -> list:
+        """Every world's frame at the current time, as `WalkerRun.frame` (the series of `self.series`)."""
+        state = self.coupled.state.to_frame()
+        produced = self.wave.produced_per_vertex()
+        arrival = self.arrival.times(self.wave.dt)
+        return [{**{name: values[s] for name, values in state.items()}, "reaction_per_vertex": produced[s],
+                 "reaction_amount": np.array(float(np.sum(produced[s].astype(np.float64)))),
+                 "first_arrival": arrival[s], "trace": self._frame_traces[w]}
+                for w, s in enumerate(self._slices)]  # fmt: skip
 
     def record(self) -> None:
         """The chemical balance of every world at the current frame."""
@@ -147,24 +163,39 @@ class WalkerBatch(WaveClock):
         self.balance.record(self.time, self.dynamics.positions(), self.wave.concentration(),
                             self.initial_totals + produced)  # fmt: skip
 
-    def run(self, progress=None) -> list:
-        """Every frame (`progress(frames done)` after each); returns one result per world: status ("done", or
-        "stopped" with its error), the frames it completed (the first included), its measurements and
-        resolved parameters."""
-        self.record()
+    def run(self, progress=None, writers=None) -> list:
+        """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
+        (wavewarp/trajectory.py; entered here), take each world's frames until it stops. Returns one result
+        per world: status ("done", or "stopped" with its error), the frames it completed (the first
+        included), its measurements and resolved parameters."""
         stopped_after = {}  # world -> the frames it completed before it stopped
-        for frame in range(self.frames):
-            try:
-                self.advance_frame()
-            except FAILURES:  # every world has stopped
-                break
-            finally:
-                for w in self.stopped:
-                    stopped_after.setdefault(w, frame)
-            self.record()
-            if progress is not None:
-                progress(frame + 1)
-        return [self.result(w, stopped_after.get(w, self.frames)) for w in range(self.worlds)]
+        with contextlib.ExitStack() as stack:
+            for writer in writers or ():
+                stack.enter_context(writer)
+            self._record(writers, stopped_after)
+            for frame in range(self.frames):
+                try:
+                    self.advance_frame()
+                except FAILURES:  # every world has stopped
+                    break
+                finally:
+                    for w in self.stopped:
+                        stopped_after.setdefault(w, frame)
+                self._record(writers, stopped_after)
+                if progress is not None:
+                    progress(frame + 1)
+            results = [self.result(w, stopped_after.get(w, self.frames)) for w in range(self.worlds)]
+            for writer, result in zip(writers or (), results):
+                writer.set_measurements(result["measurements"])
+        return results
+
+    def _record(self, writers, stopped_after: dict) -> None:
+        """The balance of every world, and each running world's frame into its writer."""
+        self.record()
+        if writers:
+            for w, frame in enumerate(self.world_frames()):
+                if w not in stopped_after:
+                    writers[w].add_frame(self.time, frame)
 
     def result(self, w: int, frames: int) -> dict:
         stopped = self.stopped.get(w)

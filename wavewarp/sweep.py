@@ -161,14 +161,19 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
 
 def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     """The points of one batch as the worlds of one batched run (`module.build_batch`); each point's
-    result written as run_point writes it, its wall time the batch's, with `batch` {worlds, world}."""
+    result written as run_point writes it (with `--h5` its trajectory too), its wall time the batch's,
+    with `batch` {worlds, world}."""
     results = [{"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
                 "batch": {"worlds": len(points), "world": w}} for w, point in enumerate(points)]  # fmt: skip
     reports, start = [], time.perf_counter()
     try:
         run = module.build_batch([point_parameters(module, spec, point) for point in points],
                                  seeds=[point.seed for point in points], device=spec.device, report=reports.append)  # fmt: skip
-        worlds = run.run()
+        writers = [TrajectoryWriter(os.path.join(out, "points", f"{point.name}.h5"), triangles=placed.mesh.triangles,
+                                    rest_positions=placed.mesh.vertices, series=run.series, scene=module.NAME,
+                                    parameters=parameters, device=str(run.shell.device))
+                   for point, placed, parameters in zip(points, run.placed, run.resolved)] if spec.h5 else None  # fmt: skip
+        worlds = run.run(writers=writers)
     except (ValueError, *FAILURES) as error:
         worlds = [{"status": "failed", "error": str(error)}] * len(points)
     else:
@@ -322,9 +327,6 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     points = grid_points(spec)
     check_points(spec, points)
     group = world_group(spec)
-    if spec.h5 and batch > 1 and group is not None:
-        raise ValueError(f"--h5 writes one trajectory per run, and {spec.scene} runs a batch of points as one batched "
-                         "run: use --batch 1 with --h5")  # fmt: skip
     prepare_folder(spec, out)
     missing = [p for p in points if not os.path.isfile(result_path(out, p))]
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
