@@ -100,7 +100,7 @@ class WalkerBatch(WaveClock):
         self.resolved = [{**as_dict(replace(q, width=width, dt=dt)), "mechanics_dt": self.dynamics.dt,
                           "substeps": self.coupled.substeps, "period_kinetic": self.period_kinetic}
                          for q, width in zip(ps, self.widths)]  # fmt: skip
-        self.traces = [self._sample(w)[None] for w in range(self.worlds)]  # every chemistry step, as WalkerRun.trace
+        self.traces = [sample[None] for sample in self._samples()]  # every chemistry step, as WalkerRun.trace
         self._frame_traces = [np.repeat(trace, self.steps_per_frame, axis=0) for trace in self.traces]  # the last frame's
         n = self.vertices
         self.series = {"positions": (n, 3), "velocities": (n, 3), "concentration": (n,), "inhibitor": (n,),
@@ -118,11 +118,15 @@ class WalkerBatch(WaveClock):
         """Σ over each world's vertices (the sums its single run takes)."""
         return np.array([float(np.sum(values[s])) for s in self._slices])
 
-    def _sample(self, w: int) -> np.ndarray:
-        s, origin = self._slices[w], self.placed[w].origin_vertex
-        c, x = self.wave.c.numpy()[s], self.dynamics.positions()[s]
-        centre = self.dynamics.mass[s] @ x / self.dynamics.world_masses[w]
-        return np.array([self.wave.time, c[origin], *centre, *x[origin]])
+    def _samples(self) -> list:
+        """Every world's trace row now (`WalkerRun._sample`), from one read of c and x."""
+        c, x, mass = self.wave.c.numpy(), self.dynamics.positions(), self.dynamics.mass
+        rows = []
+        for s, placed, world_mass in zip(self._slices, self.placed, self.dynamics.world_masses):
+            cw, xw = c[s], x[s]
+            centre = mass[s] @ xw / world_mass
+            rows.append(np.array([self.wave.time, cw[placed.origin_vertex], *centre, *xw[placed.origin_vertex]]))
+        return rows
 
     def _record_trace_row(self) -> None:
         self.dynamics.solver.launch_trace_row(self.dynamics.state, self.wave.c, self._origins, self._trace_row,

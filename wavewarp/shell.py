@@ -125,6 +125,7 @@ class Shell:
         self.thickness, self.young = world_value(self._thickness), world_value(self._young)
         self.AC, self.AI = world_value(self._AC), world_value(self._AI)
         self.volume_penalty = world_value(self._volume_penalty)
+        self.has_volume = bool(np.any(self._volume_penalty > 0))  # some world has the volume term
         self.model, self.gradient, self.deterministic = model, gradient, deterministic_default(deterministic)
 
         self.rule = str(rule)
@@ -290,7 +291,7 @@ class Shell:
         if self.self_contact is not None:
             self.self_contact.add_forces(x, None, self._energy_density)
         self._sum(self._energy_density, energy, differentiable=True)
-        if np.any(self._volume_penalty > 0):
+        if self.has_volume:
             self._launch_volume(x, differentiable=self.worlds == 1)  # the autodiff path has one world
             wp.launch(volume_energy_kernel, dim=self.worlds,
                       inputs=[self._moments, self.mesh.vertices_per_world, self._target, self._penalty],
@@ -305,7 +306,7 @@ class Shell:
         if self.gradient == "autodiff":
             self._autodiff_forces(x, forces, self._energy if energy is None else energy)
             return
-        self._force_terms(x, forces, energy, None, self._target, self._penalty)
+        self._force_terms(x, forces, energy, None, self._target, self._penalty, self.has_volume)
 
     def volume_gradient_device(self, x: wp.array, gradient: wp.array) -> None:
         """gradient = ∂V/∂x: the volume term's forces at pressure -1 (μV = 1/2, V̄ = V + 1), no elastic terms."""
@@ -313,14 +314,13 @@ class Shell:
         with wp.ScopedDevice(self.device):
             target = wp.array(np.atleast_1d(self._volume_of(x)) + 1.0, dtype=wp.float64)
             penalty = wp.full(self.worlds, 0.5, dtype=wp.float64)
-        self._force_terms(x, gradient, None, (zero, zero), target, penalty, contact=False)
+        self._force_terms(x, gradient, None, (zero, zero), target, penalty, True, contact=False)
 
-    def _force_terms(self, x, forces, energy, moduli, target, penalty, contact: bool = True) -> None:
-        """forces_device with the elastic moduli (None: the shell's) and the per-world volume targets and
-        penalties (float64 device arrays) given."""
+    def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
+        """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
+        penalties (float64 device arrays) given, and the volume term where `with_volume`."""
         t = self.tables
         volume = [self._moments, target, penalty]
-        with_volume = penalty is not self._penalty or np.any(self._volume_penalty > 0)
         if with_volume:
             self._launch_volume(x, differentiable=False)  # V for the pressure, S and x̄ for the centroid term
             if not self.deterministic:  # the atomic scatter adds onto the centroid term
