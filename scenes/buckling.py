@@ -6,6 +6,7 @@ from wavewarp.figures import buckling_png
 from wavewarp.measurements import buckling_measurements, symmetry_number
 from wavewarp.parameters import param
 from wavewarp.quasistatic import SphereParameters, sphere_wave_run
+from wavewarp.quasistatic_batch import sphere_wave_batch
 
 NAME = "buckling"
 DESCRIPTION = "buckling sphere, R/h = 20, AI = 11, AC = 0: telegraph wave from the pole, seeded noise (Fig. S1a)"
@@ -40,3 +41,10 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_wave_run(NAME, p, mesh=mesh, device=device, seed=seed, report=report, profile=symmetry_number,
                            measure=buckling_measurements, figures={"symmetry": buckling_png},
                            self_contact=p.self_contact, adaptive_dt=p.adaptive_dt)  # fmt: skip
+
+
+def build_batch(ps, *, seeds, device=None, report=print):
+    """Worlds of this scene stepped together (wavewarp/quasistatic_batch.py; adaptive_dt and self_contact
+    false): one parameter set and seed per world."""
+    return sphere_wave_batch(NAME, ps, seeds=seeds, device=device, report=report, profile=symmetry_number,
+                             measure=buckling_measurements)  # fmt: skip

@@ -115,6 +115,30 @@ def test_a_batched_walker_sweep_keeps_each_points_trajectory(tmp_path):
     assert not np.array_equal(last[0], last[1])
 
 
+def test_a_batched_buckling_sweep_gives_each_point_its_single_runs_result(tmp_path):
+    """The Fig. S1b sweep's shape (AI x thickness, per-world parameters) at level 2: the four points as one
+    batched run (deterministic float64) have the measurements of the same sweep run point by point, each
+    point's trajectory holds its frames, and the chart shows n_mode over the grid."""
+    fixed = ("level=2", "frames=2", "t_end=2", "dtype=float64", "adaptive_dt=false", "self_contact=false",
+             "relax_iterations=300")  # fmt: skip
+    grid = {"AI": ["10.5", "13.5"], "thickness": ["0.25", "0.5"]}
+    results = {}
+    for batch in (4, 1):
+        spec = SweepSpec("buckling-modes", grid=grid, fixed=fixed, device="cpu", deterministic=True, h5=batch > 1,
+                         measure="n_mode")  # fmt: skip
+        out = tmp_path / f"batch{batch}"
+        rows = sweep(spec, str(out), executor=CountingExecutor(), batch=batch)
+        assert [row["status"] for row in rows] == ["done"] * 4 and (out / "chart.png").stat().st_size > 0
+        for point in grid_points(spec):
+            with open(out / "points" / f"{point.name}.json") as f:
+                results.setdefault(point.name, []).append(json.load(f))
+    for name, (batched, single) in results.items():
+        assert batched["batch"]["worlds"] == 4 and "batch" not in single
+        assert batched["measurements"] == single["measurements"] and batched["frames"] == single["frames"] == 3
+        with h5py.File(tmp_path / "batch4" / "points" / f"{name}.h5", "r") as trajectory:
+            assert len(trajectory["frames"]["positions"]) == 3
+
+
 def test_bad_points_are_refused_before_anything_runs(tmp_path):
     with pytest.raises(SceneError, match="unknown parameter 'bogus' in --grid"):
         sweep(SweepSpec("cube-waves", grid={"bogus": ["1"]}), str(tmp_path), executor=CountingExecutor())

@@ -65,7 +65,8 @@ class WalkerBatch(WaveClock):
             raise ValueError("the worlds' grounds differ (the area contact's automatic area per point follows each "
                              "world's area): set contact_area to one value for the batch")  # fmt: skip
         self.name, self.ps, self.radius, self.placed, self.worlds = name, ps, radius, placed, len(ps)
-        self.mesh = Mesh.union([pl.mesh for pl in placed])
+        self.world_meshes = [pl.mesh for pl in placed]
+        self.mesh = Mesh.union(self.world_meshes)
         self.model = walker_model(self.mesh, ps, placed[0].ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
         self.dynamics = walker_dynamics(self.model, p)

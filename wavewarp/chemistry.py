@@ -111,6 +111,12 @@ class ChemistrySolver(ABC):
             self._bound_version = self.operator.version
         return self._stable_dt
 
+    def world_stable_dts(self, worlds: int) -> np.ndarray:
+        """Each batched world's own stability bound on the operator's current surface (host-driven power
+        iteration per world: names the world whose surface lowered the batch's `stable_dt`)."""
+        eigenvalues = self.operator.world_largest_eigenvalues(worlds, self.mass_corrections)
+        return np.array([self._bound(float(value)) for value in eigenvalues])
+
     def move_surface(self, state: State, x) -> None:
         """Move the operator to control positions `x` ((V, 3) NumPy or a wp.array of vec3 on the device)
         and carry the state's chemical with it: "conservative" keeps every vertex's amount M_I c_I (c_I

@@ -249,7 +249,8 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grid.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a parameter fixed for all points")
     grid.add_argument("--seeds", type=int, default=1, help="seeds 0 … K-1 at every grid point (default 1)")
     grid.add_argument("--batch", type=int, default=1,
-                      help="points per task: the worlds of one batched run for scenes that have them (the walkers), "
+                      help="points per task: the worlds of one batched run for scenes that have them (the walkers, buckling, "
+                      "buckling-modes), "
                       "else run one after another by a worker")  # fmt: skip
     grid.add_argument("--out", required=True, help="folder of the results (DIR/points/*.json, table.csv, chart.png)")
     grid.add_argument("--device", default=None, choices=("cpu", "cuda"),

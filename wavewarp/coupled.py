@@ -30,8 +30,8 @@ from .kernels.dynamics import eval_reference_ramp
 from .relax import NEWTON_STEPS, ROUND_OFF_SLACK, RelaxationError, checked_method, relax
 from .runner import GuardedRunner
 from .shell import Shell
-from .state import State
-from .waves import TimeStepError, _Stepper
+from .state import FIELDS, State
+from .waves import BlowUpError, TimeStepError, _Stepper
 
 
 def _check_pair(shell: Shell, wave: _Stepper) -> None:
@@ -55,7 +55,17 @@ class QuasiStatic:
     lags its reference instead of stopping the run); such steps are counted in `unconverged`.
     `method` and `max_iterations`, `newton_steps`: Shell.relax's ("auto": CG, then a Newton finish
     where CG spends its budget; counted in `newton_finishes`). The positions join the wave's state.
+
+    Batched worlds (`Mesh.union`): every world relaxes in the same launches (nonlinear CG, one line
+    search and convergence test per world). A world whose wave blows up, whose surface lowers the
+    stability bound below the fixed dt, or whose relaxation fails is stopped alone: `stopped` maps it
+    to its error, `frozen(w)` holds its state at the start of the step it failed in, and its share of
+    the live state is parked at rest (x the rest shape, no chemical: it stays put at no cost and
+    cannot lower the bound); the step is then taken again for the others. The run raises only once
+    every world has stopped.
     """
+
+    TALLIES = ("relaxations", "relax_iterations", "unconverged_relaxations", "newton_finishes", "round_off_relaxations")
 
     def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
                  x0=None, max_iterations: int = 20000, overdamped: bool = False, method: str = "auto",
@@ -71,66 +81,108 @@ class QuasiStatic:
         self.tol = float(tol)
         self.max_iterations = count("max_iterations", max_iterations, 1)
         self.method, self.newton_steps = checked_method(method), count("newton_steps", newton_steps, 1)
-        self.newton_finishes = 0  # relaxations that Newton steps finished
         self.overdamped = bool(overdamped)
-        self.unconverged = 0  # overdamped relaxations that used their whole iteration budget
+        self.worlds = shell.worlds
+        self.tallies = {name: np.zeros(self.worlds, dtype=np.int64) for name in self.TALLIES}
+        self.relax_iterations = []  # CG iterations per relaxation (one world; a batch: an array per relaxation)
+        self.stopped = {}  # batched worlds: world -> the error that stopped it
+        self._frozen = {}  # world -> its state arrays' share at the start of the step it failed in
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
         wave.state.x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
-        self.relax_iterations = []  # per relaxation since construction or `restore_counters`
-        self.earlier_relaxations = (0, 0)  # (count, iterations) before a resume
-        self.round_off_stops = 0  # relaxations accepted at the round-off floor, within ROUND_OFF_SLACK × tol
-        self._equilibrate(initial=True)
+        self._equilibrate(initial=True, start=self._start_of_step())
 
     state = property(lambda self: self.wave.state)
     time = property(lambda self: self.wave.time)
+    unconverged = property(lambda self: int(self.tallies["unconverged_relaxations"][0]))
+    newton_finishes = property(lambda self: int(self.tallies["newton_finishes"][0]))
+    round_off_stops = property(lambda self: int(self.tallies["round_off_relaxations"][0]))
 
     def positions(self) -> np.ndarray:
         """(V, 3) control positions of the current equilibrium."""
         return self.state.numpy("x")
 
-    def _equilibrate(self, initial: bool = False) -> None:
-        x = self.state.x
-        self.shell.update_reference(self.state.c)
+    def _start_of_step(self):
+        """Batched worlds: copies of the state arrays, where a world that fails in this step stops."""
+        return [wp.clone(a) for a in self.state.arrays()] if self.worlds > 1 else None
+
+    def _equilibrate(self, initial: bool = False, start=None) -> None:
+        x, shell = self.state.x, self.shell
+        shell.update_reference(self.state.c)
+        running = np.array([w not in self.stopped for w in range(self.worlds)])
+        failed = []
         try:
-            relax(self.shell, x, self.tol, self.max_iterations, out=x, method=self.method,
+            relax(shell, x, self.tol, self.max_iterations, out=x, method=self.method,
                   newton_steps=self.newton_steps)  # device to device
         except RelaxationError as error:
-            if error.round_off and error.residual <= ROUND_OFF_SLACK * self.tol:
-                self.round_off_stops += 1  # the dtype's round-off floor just above tol (sharp corners, float32)
-            elif self.overdamped:
-                # overdamped: the shell lags its reference (budget spent, or no lower energy found at a
-                # sharp fold); the next step goes on from here
-                self.unconverged += 1
-            else:
-                raise
-            x.assign(error.x.astype(self.shell._real))
-        self.relax_iterations.append(len(self.shell.relax_history) - 1)
-        self.newton_finishes += self.shell.newton_steps > 0
+            for w, (residual, round_off) in error.failures.items():
+                if round_off and residual <= ROUND_OFF_SLACK * self.tol:
+                    self.tallies["round_off_relaxations"][w] += 1  # the dtype's floor just above tol (float32)
+                elif self.overdamped:
+                    # overdamped: the shell lags its reference (budget spent, or no lower energy found at a
+                    # sharp fold); the next step goes on from here
+                    self.tallies["unconverged_relaxations"][w] += 1
+                elif self.worlds == 1:
+                    raise
+                else:
+                    failed.append(w)
+            x.assign(error.x.astype(shell._real))
+            relaxation_error = error
+        histories = shell.relax_history if self.worlds > 1 else [shell.relax_history]
+        iterations = np.array([len(history) - 1 for history in histories])
+        self.relax_iterations.append(iterations if self.worlds > 1 else int(iterations[0]))
+        self.tallies["relaxations"] += running
+        self.tallies["relax_iterations"] += np.where(running, iterations, 0)
+        self.tallies["newton_finishes"][0] += shell.newton_steps > 0
+        if failed:
+            self._stop(failed, relaxation_error, start)
         if self.sensitive and initial:
             self.operator.update(x)
         elif self.sensitive:
             self.wave.move_surface(x)
 
-    def counters(self) -> dict:
-        """The run's bookkeeping so far, as whole numbers: relaxations and their CG iterations, the
+    def _stop(self, worlds, error: Exception, start) -> None:
+        """Stop `worlds` (batched): their state at the step's start is kept, their live share parked at
+        rest. Raises `error` once every world has stopped."""
+        rest = self.shell.mesh.vertices.astype(self.shell._real)
+        n = self.shell.mesh.vertices_per_world
+        for w in worlds:
+            self.stopped[w] = error
+            shares = []
+            for copy in start:
+                share = wp.empty(len(copy) // self.worlds, dtype=copy.dtype, device=copy.device)
+                wp.copy(share, copy, src_offset=w * len(share), count=len(share))
+                shares.append(share)
+            self._frozen[w] = shares
+            for array in self.state.arrays():
+                size = len(array) // self.worlds
+                array[w * size:(w + 1) * size].zero_()
+            share = wp.array(rest[w * n:(w + 1) * n], dtype=self.shell.vec3, device=self.shell.device)
+            wp.copy(self.state.x, share, dest_offset=w * n)
+        if len(self.stopped) == self.worlds:
+            raise error
+
+    def frozen(self, w: int) -> dict | None:
+        """A stopped world's state arrays (NumPy, by State field and history name) at the start of the
+        step it failed in; None while it runs."""
+        if w not in self._frozen:
+            return None
+        names = [name for name in FIELDS if getattr(self.state, name) is not None] + list(self.state.history)
+        return {name: share.numpy() for name, share in zip(names, self._frozen[w])}
+
+    def counters(self, world: int = 0) -> dict:
+        """World `world`'s bookkeeping so far, as whole numbers: relaxations and their CG iterations, the
         unconverged, Newton-finished and round-off relaxations (stored per frame, for a resume)."""
-        count, iterations = self.earlier_relaxations
-        return {"relaxations": count + len(self.relax_iterations),
-                "relax_iterations": iterations + int(np.sum(self.relax_iterations, dtype=np.int64)),
-                "unconverged_relaxations": self.unconverged, "newton_finishes": self.newton_finishes,
-                "round_off_relaxations": self.round_off_stops}  # fmt: skip
+        return {name: int(values[world]) for name, values in self.tallies.items()}
 
     def restore_counters(self, counters: dict) -> None:
         """Continue the bookkeeping of `counters()` (a resumed run's)."""
         self.relax_iterations = []
-        self.earlier_relaxations = (int(counters["relaxations"]), int(counters["relax_iterations"]))
-        self.unconverged = int(counters["unconverged_relaxations"])
-        self.newton_finishes = int(counters["newton_finishes"])
-        self.round_off_stops = int(counters["round_off_relaxations"])
+        for name in self.TALLIES:
+            self.tallies[name][0] = int(counters[name])
 
-    def relax_iterations_mean(self) -> float:
+    def relax_iterations_mean(self, world: int = 0) -> float:
         """CG iterations per relaxation over the whole run."""
-        counters = self.counters()
+        counters = self.counters(world)
         return counters["relax_iterations"] / counters["relaxations"]
 
     def restore(self, x) -> None:
@@ -139,10 +191,32 @@ class QuasiStatic:
         if self.sensitive:
             self.operator.update(self.state.x)
 
+    def _advance(self, start) -> None:
+        """The wave's `chemistry_steps`; batched worlds: a world that blows up or whose surface lowers the
+        bound below dt is stopped (found by its flag, or by each world's own bound) and the rest go on."""
+        target = self.wave.steps + self.chemistry_steps
+        while self.wave.steps < target:
+            try:
+                self.wave.advance(target - self.wave.steps)
+            except (BlowUpError, TimeStepError) as error:
+                if self.worlds == 1:
+                    raise
+                if isinstance(error, TimeStepError):
+                    failed = np.flatnonzero(self.wave.solver.world_stable_dts(self.worlds) < self.wave.dt)
+                else:
+                    failed = np.flatnonzero(self.wave.solver.flag.numpy())
+                failed = [int(w) for w in failed if int(w) not in self.stopped]
+                if not failed:
+                    raise
+                self._stop(failed, error, start)
+                if self.sensitive:  # the parked worlds' rest surface: the bound anew
+                    self.operator.update(self.state.x)
+
     def step(self):
         """Advance the wave `chemistry_steps` steps, then relax the shell to the new reference; returns self."""
-        self.wave.advance(self.chemistry_steps)
-        self._equilibrate()
+        start = self._start_of_step()
+        self._advance(start)
+        self._equilibrate(start=start)
         return self
 
 

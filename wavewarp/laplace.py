@@ -453,3 +453,30 @@ class LaplaceBeltrami:
                 break
             previous = estimate
         return estimate
+
+    def world_largest_eigenvalues(self, worlds: int, mass_corrections: int = 0, tol: float = 1e-5,
+                                  max_iterations: int = 20000, check_every: int = 20) -> np.ndarray:  # fmt: skip
+        """λ_max(W_p K) of each of `worlds` equal blocks (batched worlds never couple: W_p K is block
+        diagonal), by `largest_eigenvalue`'s power iteration with each block normalised on its own.
+        Host-driven (a read per iteration): for naming the world that lowered a batch's bound, not for
+        the step loop."""
+        n, corrections = self.n_vertices, int(mass_corrections)
+        start = np.random.default_rng(corrections).uniform(-1.0, 1.0, (worlds, n // worlds))
+        u = wp.array(start.ravel().astype(self._real), dtype=self.scalar, device=self.device)
+        y, z = wp.empty_like(u), wp.empty_like(u)
+        if corrections and self.assembled and self._mass_version != self.version:
+            self._assemble_mass()
+        previous = np.zeros(worlds)
+        for iteration in range(1, max_iterations + 1):
+            self.apply_device(u, y)
+            self.inverse_mass_device(y, z, corrections)
+            uu, yy, zz = (a.numpy().astype(np.float64).reshape(worlds, -1) for a in (u, y, z))
+            estimate = np.sum(yy * zz, axis=1) / np.sum(uu * yy, axis=1)
+            if not np.all(np.isfinite(estimate) & (estimate > 0)):
+                raise RuntimeError(f"world_largest_eigenvalues: power iteration broke down (estimates {estimate})")
+            u.assign((zz / np.linalg.norm(zz, axis=1, keepdims=True)).ravel().astype(self._real))
+            if iteration % check_every == 0:
+                if np.all(estimate - previous <= tol * estimate):
+                    break
+                previous = estimate
+        return estimate

@@ -185,10 +185,16 @@ def shape_asymmetry(run, x) -> tuple:
 
 
 def buckling_measurements(run) -> dict:
+    """The frames' symmetry numbers n at the front; the largest; `n_mode`, the n most frames read
+    (the smaller of a tie; 0 when no frame buckled: a phase diagram's entry); `amplitude_max_h`, the
+    largest ring amplitude over the frames (units of h)."""
     n = [int(value[0]) for _, value in run.profiles]
     times = [t for t, _ in run.profiles]
     k = int(np.argmax(n)) if n else 0
+    buckled = [m for m in n if m]
     return {"symmetry_numbers": n, "n_max": n[k] if n else 0, "t_n_max": times[k] if n else None,
+            "n_mode": max(sorted(set(buckled)), key=buckled.count) if buckled else 0,
+            "amplitude_max_h": max((float(value[1]) for _, value in run.profiles), default=0.0),
             "t_front_at_equator": (0.5 * math.pi * run.size - run.front_start) / run.p.gamma}  # fmt: skip
 
 

@@ -99,6 +99,63 @@ UNRESOLVED_MASS_GROWTH = 50.0  # a vertex's lumped mass over its rest value past
 COUNTER = "count_"  # the prefix of the frames' bookkeeping series (relaxations, iterations, ...)
 
 
+def quasi_static_model(mesh: Mesh, ps: list, *, size: float, rule: str = "3", device=None, self_contact: bool = False):
+    """The quasi-static scenes' Model: Koiter shell, volume term where μV > 0, self-contact where asked,
+    the telegraph wave. `ps`: one parameter set, or one per batched world of `mesh` (a `Mesh.union`;
+    they differ only in batch.PER_WORLD)."""
+    p = ps[0]
+    values = lambda name: [getattr(q, name) for q in ps] if len(ps) > 1 else getattr(p, name)  # noqa: E731
+    builder = ModelBuilder(mesh, device=device, dtype=p.dtype, rule=rule)
+    builder.add_koiter(thickness=values("thickness"), young=values("young"), poisson=p.poisson, AC=values("AC"),
+                       AI=values("AI"))  # fmt: skip
+    if any(q.mu_v > 0 for q in ps):
+        penalties = [q.mu_v * q.young * q.thickness / size**4 for q in ps]
+        builder.add_volume(penalty=penalties if len(ps) > 1 else penalties[0])
+    if self_contact:
+        builder.add_self_contact()
+    builder.add_telegraph(gamma=p.gamma, alpha=p.alpha, sensitive=p.sensitive, mass_corrections=p.mass_corrections,
+                          transport=p.transport)  # fmt: skip
+    try:
+        return builder.finalize()
+    except ValueError as error:  # self-contact on too coarse a mesh: name the scene's switches
+        if not self_contact:
+            raise
+        raise ValueError(f"{error}: raise --set level, or --set self_contact=false") from None
+
+
+def initial_values(operator, origin, initial: dict, *, gamma: float, size: float) -> tuple:
+    """(c0, v0) of `initial`: "gaussian" (sigma, distance) or "front" (k, delta), from `origin`."""
+    if initial["kind"] == "gaussian":
+        return gaussian_pulse(operator, origin, initial["sigma"], gamma=gamma, radius=size,
+                              distance=initial.get("distance", "chord"))  # fmt: skip
+    return steady_front(operator, origin, k=initial["k"], delta=initial["delta"], gamma=gamma)
+
+
+def frame_clock(p, t_end: float, edge: float, bound: float, report=print) -> tuple:
+    """(dt, relax_every, steps_per_frame, frames) of a quasi-static run to `t_end` with `p.frames`
+    frames, control edges `edge` long and the wave's stability bound `bound` on the rest surface."""
+    interval = t_end / p.frames
+    dt = p.dt or 0.4 * bound
+    relax_every = p.relax_every or max(1, int(min(0.5 * edge / p.gamma, interval) / dt))
+    # (1e-9: a resumed run's stored dt and frames give back the same layout despite round-off)
+    steps_per_frame = relax_every * max(1, math.ceil(interval / (relax_every * dt) - 1e-9))
+    if not p.dt:  # the automatic step shrinks so that the frames asked for end on t_end
+        dt = interval / steps_per_frame
+    frames = max(1, round(t_end / (steps_per_frame * dt)))
+    if frames < p.frames:
+        report(f"{frames} frames, not the {p.frames} asked for: a frame ends on a relaxation, every "
+               f"{relax_every} steps of dt = {dt:.4g}; with --set dt=auto every frame is written")  # fmt: skip
+    return dt, relax_every, steps_per_frame, frames
+
+
+def quasi_static_coupling(shell, wave, p, relax_every: int) -> QuasiStatic:
+    """The scenes' QuasiStatic coupling from the parameters (relax_iterations auto: CG_BUDGET)."""
+    budget = p.relax_iterations or CG_BUDGET[shell.device.is_cuda]
+    return QuasiStatic(shell, wave, sensitive=p.sensitive, chemistry_steps=relax_every, tol=p.relax_tol or None,
+                       max_iterations=budget, overdamped=p.overdamped, method=p.relax_method,
+                       newton_steps=p.newton_steps)  # fmt: skip
+
+
 class QuasiStaticWaveRun(WaveClock):
     """A telegraph wave on a quasi-static active shell: the oocyte, wave-guide and buckling scenes.
 
@@ -112,44 +169,16 @@ class QuasiStaticWaveRun(WaveClock):
                  device=None, self_contact: bool = False, adaptive_dt: bool = False, profile=None, measure=None,
                  figures=None, report=print):  # fmt: skip
         self.name, self.mesh, self.p = name, mesh, p
-        builder = ModelBuilder(mesh, device=device, dtype=p.dtype, rule=rule)
-        builder.add_koiter(thickness=p.thickness, young=p.young, poisson=p.poisson, AC=p.AC, AI=p.AI)
-        if p.mu_v > 0:
-            builder.add_volume(penalty=p.mu_v * p.young * p.thickness / size**4)
-        if self_contact:
-            builder.add_self_contact()
-        builder.add_telegraph(gamma=p.gamma, alpha=p.alpha, sensitive=p.sensitive, mass_corrections=p.mass_corrections,
-                              transport=p.transport)  # fmt: skip
-        try:
-            self.model = builder.finalize()
-        except ValueError as error:  # self-contact on too coarse a mesh: name the scene's switches
-            if not self_contact:
-                raise
-            raise ValueError(f"{error}: raise --set level, or --set self_contact=false") from None
+        self.model = quasi_static_model(mesh, [p], size=size, rule=rule, device=device, self_contact=self_contact)
         self.shell = self.model.shell
         self.operator = self.model.operator()
-        if initial["kind"] == "gaussian":
-            c0, v0 = gaussian_pulse(self.operator, origin, initial["sigma"], gamma=p.gamma, radius=size,
-                                    distance=initial.get("distance", "chord"))  # fmt: skip
-        else:
-            c0, v0 = steady_front(self.operator, origin, k=initial["k"], delta=initial["delta"], gamma=p.gamma)
-        interval = t_end / p.frames
-        dt = p.dt or 0.4 * self.model.wave(self.operator, c0=c0).stable_dt
-        relax_every = p.relax_every or max(1, int(min(0.5 * mean_edge(mesh) / p.gamma, interval) / dt))
-        # (1e-9: a resumed run's stored dt and frames give back the same layout despite round-off)
-        self.steps_per_frame = relax_every * max(1, math.ceil(interval / (relax_every * dt) - 1e-9))
-        if not p.dt:  # the automatic step shrinks so that the frames asked for end on t_end
-            dt = interval / self.steps_per_frame
-        self.frames = max(1, round(t_end / (self.steps_per_frame * dt)))
-        if self.frames < p.frames:
-            report(f"{self.frames} frames, not the {p.frames} asked for: a frame ends on a relaxation, every "
-                   f"{relax_every} steps of dt = {dt:.4g}; with --set dt=auto every frame is written")  # fmt: skip
+        c0, v0 = initial_values(self.operator, origin, initial, gamma=p.gamma, size=size)
+        dt, relax_every, self.steps_per_frame, self.frames = frame_clock(
+            p, t_end, mean_edge(mesh), self.model.wave(self.operator, c0=c0).stable_dt, report)  # fmt: skip
         self.wave = self.model.wave(self.operator, c0=c0, v0=v0, dt=dt)
-        budget = p.relax_iterations or CG_BUDGET[self.shell.device.is_cuda]
-        self.coupled = QuasiStatic(self.shell, self.wave, sensitive=p.sensitive, chemistry_steps=relax_every,
-                                   tol=p.relax_tol or None, max_iterations=budget, overdamped=p.overdamped,
-                                   method=p.relax_method, newton_steps=p.newton_steps)  # fmt: skip
-        self.resolved = as_dict(replace(p, dt=dt, relax_every=relax_every, frames=self.frames, relax_iterations=budget))
+        self.coupled = quasi_static_coupling(self.shell, self.wave, p, relax_every)
+        self.resolved = as_dict(replace(p, dt=dt, relax_every=relax_every, frames=self.frames,
+                                        relax_iterations=self.coupled.max_iterations))  # fmt: skip
         # the telegraph invariant from the state at t = 0 (on the equilibrium surface)
         self.invariant = (self.wave.total(), self.wave.total_rate(), p.alpha, dt)
         self.balance = ChemicalBalance(mesh, sensitive=p.sensitive, rule=rule, device=device, dtype=p.dtype)
@@ -268,10 +297,7 @@ class QuasiStaticWaveRun(WaveClock):
     def measurements(self) -> dict:
         x = self.coupled.positions()
         out = {"time": self.time, "volume": self.shell.volume(x),
-               "relax_iterations_mean": self.coupled.relax_iterations_mean(),
-               "unconverged_relaxations": self.coupled.unconverged,
-               "newton_finishes": self.coupled.newton_finishes,
-               "round_off_relaxations": self.coupled.round_off_stops, **self.balance.measurements()}  # fmt: skip
+               **relaxation_measurements(self.coupled), **self.balance.measurements()}  # fmt: skip
         if self.adaptive:
             out["chemistry_dt_changes"], out["chemistry_dt"] = self.dt_changes, self.wave.dt
         if self.shell.self_contact is not None:
@@ -288,6 +314,14 @@ class QuasiStaticWaveRun(WaveClock):
             paths.append(f"{stem}_{name}.png")
             draw(self, paths[-1])
         return paths
+
+
+def relaxation_measurements(coupled: QuasiStatic, world: int = 0) -> dict:
+    """A world's relaxation bookkeeping over the run (its measurements)."""
+    counters = coupled.counters(world)
+    return {"relax_iterations_mean": coupled.relax_iterations_mean(world),
+            "unconverged_relaxations": counters["unconverged_relaxations"],
+            "newton_finishes": counters["newton_finishes"], "round_off_relaxations": counters["round_off_relaxations"]}  # fmt: skip
 
 
 def sphere_wave_run(name: str, p, *, mesh=None, device=None, seed=0, initial=None, report=print, profile=None,

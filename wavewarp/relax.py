@@ -56,16 +56,18 @@ NEWTON_STEPS = 500
 class RelaxationError(RuntimeError):
     """`Shell.relax` did not reach its tolerance; `.residual` is where it stopped, `.x` the positions
     there, `.round_off` whether it stopped because no lower energy could be resolved, `.iterations`
-    how many it took."""
+    how many it took. Batched worlds: `.worlds` lists those that did not converge (the others did)
+    and `.failures` maps each to its (residual, round_off); the scalars are the worst world's."""
 
     def __init__(self, message: str, residual: float, x: np.ndarray, round_off: bool = False, iterations: int = 0,
-                 worlds=None):  # fmt: skip
+                 worlds=None, failures=None):  # fmt: skip
         super().__init__(message)
         self.residual = residual
         self.x = x
         self.round_off = round_off
         self.iterations = iterations
-        self.worlds = worlds  # batched worlds: those that did not converge (the others did)
+        self.worlds = worlds
+        self.failures = failures if failures is not None else {0: (residual, round_off)}
 
 
 def _inverse_stiffness(shell) -> np.ndarray:
@@ -231,6 +233,7 @@ class Relaxation:
                if round_off else "; raise max_iterations or tol"),  # fmt: skip
             residual, x, round_off=round_off, iterations=int(iterations[w]),
             worlds=None if worlds == 1 else failed.tolist(),
+            failures={int(f): (float(residuals[f]), bool(statuses[f] != BUDGET_SPENT)) for f in failed},
         )  # fmt: skip
 
 

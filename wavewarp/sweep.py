@@ -10,7 +10,8 @@ so a killed sweep loses only the points being computed; running the same sweep i
 DIR again computes only the points without a result. At the end the sweep writes DIR/table.csv
 (a row per point) and DIR/chart.png (a measurement against the grid).
 
-Scenes with batched worlds (`build_batch`: the walkers, wavewarp/batch.py) run a batch of points
+Scenes with batched worlds (`build_batch`: the walkers, wavewarp/batch.py; buckling and
+buckling-modes, wavewarp/quasistatic_batch.py) run a batch of points
 as one batched run: its points differ only in the per-world parameters (batch.PER_WORLD and the
 seed); points that differ in another are dealt to other batches.
 """
@@ -169,10 +170,10 @@ def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     try:
         run = module.build_batch([point_parameters(module, spec, point) for point in points],
                                  seeds=[point.seed for point in points], device=spec.device, report=reports.append)  # fmt: skip
-        writers = [TrajectoryWriter(os.path.join(out, "points", f"{point.name}.h5"), triangles=placed.mesh.triangles,
-                                    rest_positions=placed.mesh.vertices, series=run.series, scene=module.NAME,
+        writers = [TrajectoryWriter(os.path.join(out, "points", f"{point.name}.h5"), triangles=mesh.triangles,
+                                    rest_positions=mesh.vertices, series=run.series, scene=module.NAME,
                                     parameters=parameters, device=str(run.shell.device))
-                   for point, placed, parameters in zip(points, run.placed, run.resolved)] if spec.h5 else None  # fmt: skip
+                   for point, mesh, parameters in zip(points, run.world_meshes, run.resolved)] if spec.h5 else None  # fmt: skip
         worlds = run.run(writers=writers)
     except (ValueError, *FAILURES) as error:
         worlds = [{"status": "failed", "error": str(error)}] * len(points)
@@ -202,7 +203,11 @@ def world_group(spec: SweepSpec):
     module = load_scene(spec.scene)
     if not hasattr(module, "build_batch"):
         return None
-    return lambda point: replace(point_parameters(module, spec, point), **dict.fromkeys(PER_WORLD))
+    def shared(point):
+        p = point_parameters(module, spec, point)
+        return replace(p, **{name: None for name in PER_WORLD if hasattr(p, name)})
+
+    return shared
 
 
 def batches(points, size: int, group=None) -> list:

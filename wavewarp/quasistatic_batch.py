@@ -1,0 +1,189 @@
+"""Batched quasi-static waves (docs/theory/batches.md): N sphere worlds of one mesh topology, one wave
+and one relaxation for all.
+
+The worlds' meshes (each its own seeded imperfection) form one `Mesh.union`; one Model holds them with
+per-world couplings and moduli (AC, AI, h, Y, μV); the telegraph wave steps every world in the same
+launches, and every relaxation is one nonlinear-CG loop with a line search and a convergence test per
+world. Worlds never interact, so in deterministic float64 each world equals its own single run bit for
+bit (tests/test_batch_quasistatic.py). A world whose wave blows up, whose surface lowers the stability
+bound below the shared dt, or whose relaxation fails (not overdamped) is stopped alone
+(`QuasiStatic.stopped`); the others go on.
+
+    batch = buckling_modes.build_batch([p0, p1, p2], seeds=[0, 0, 0])
+    results = batch.run()        # one dict per world: status, stopped, frames, measurements, parameters
+
+Batches take the fixed dt (adaptive_dt=false: one dt steps every world) and no self-contact (the
+worlds share one space).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from .balance import ChemicalBalance
+from .batch import check_batch
+from .chemistry import telegraph_total
+from .driver import FAILURES
+from .laplace import LaplaceBeltrami
+from .mesh import Mesh, icosphere
+from .parameters import as_dict
+from .quasistatic import frame_clock, initial_values, quasi_static_coupling, quasi_static_model, relaxation_measurements
+from .runs import WaveClock, imperfect, mean_edge, scene_mesh
+
+
+class WorldView:
+    """What a scene's profile and measurement functions read of a run (`size`, `origin`, `mesh`, `p`,
+    `front_start`, `profiles`, `profile_time`), for one world of a batch."""
+
+    def __init__(self, mesh: Mesh, p, *, size: float, origin, front_start: float):
+        self.mesh, self.p, self.size, self.origin, self.front_start = mesh, p, size, origin, front_start
+        self.profiles, self.profile_time = [], 0.0
+
+
+class QuasiStaticBatch(WaveClock):
+    """Quasi-static wave worlds stepped together: `meshes` (one topology) and parameters `ps`, one per
+    world; `size`, `origin`, `initial`, `t_end`, `rule`, `profile`, `measure` as QuasiStaticWaveRun's.
+    The worlds share the wave's dt (the strictest world's bound) and its relaxation schedule."""
+
+    def __init__(self, name: str, meshes: list, ps: list, *, size: float, origin, initial: dict, t_end: float,
+                 front_start: float = 0.0, rule: str = "3", device=None, profile=None, measure=None, report=print):  # fmt: skip
+        ps = list(ps)
+        check_batch(ps)
+        if len(meshes) != len(ps):
+            raise ValueError(f"a batch needs one mesh per world: {len(meshes)} meshes for {len(ps)} parameter sets")
+        p = self.p = ps[0]
+        self.name, self.ps, self.worlds, self.world_meshes = name, ps, len(ps), list(meshes)
+        self.mesh = Mesh.union(meshes)
+        self.model = quasi_static_model(self.mesh, ps, size=size, rule=rule, device=device)
+        self.shell = self.model.shell
+        self.operator = self.model.operator()
+        n = self.vertices = self.mesh.vertices_per_world
+        self._slices = [slice(w * n, (w + 1) * n) for w in range(self.worlds)]
+        # each world's initial values on its own operator, exactly as its single run makes them
+        initials = [initial_values(LaplaceBeltrami(mesh, rule=rule, device=device, dtype=p.dtype), origin, initial,
+                                   gamma=p.gamma, size=size) for mesh in meshes]  # fmt: skip
+        c0, v0 = (np.concatenate(values) for values in zip(*initials))
+        edge = min(mean_edge(mesh) for mesh in meshes)
+        dt, relax_every, self.steps_per_frame, self.frames = frame_clock(
+            p, t_end, edge, self.model.wave(self.operator, c0=c0).stable_dt, report)  # fmt: skip
+        self.wave = self.model.wave(self.operator, c0=c0, v0=v0, dt=dt)
+        self.coupled = quasi_static_coupling(self.shell, self.wave, p, relax_every)
+        self.resolved = [as_dict(replace(q, dt=dt, relax_every=relax_every, frames=self.frames,
+                                         relax_iterations=self.coupled.max_iterations)) for q in ps]  # fmt: skip
+        mass, c, rate = self.operator.mass(), self.wave.concentration(), self.wave.velocity()
+        self.invariants = [(float(mass[s] @ c[s]), float(mass[s] @ rate[s])) for s in self._slices]
+        self.balance = ChemicalBalance(self.mesh, sensitive=p.sensitive, rule=rule, device=device, dtype=p.dtype)
+        self.series = {"positions": (n, 3), "concentration": (n,), "concentration_rate": (n,)}
+        self.frame_interval = self.steps_per_frame * dt
+        self.views = [WorldView(mesh, q, size=size, origin=np.asarray(origin, dtype=np.float64), front_start=front_start)
+                      for mesh, q in zip(meshes, ps)]  # fmt: skip
+        self._profile, self._measure = profile, measure
+
+    @property
+    def stopped(self) -> dict:
+        """World -> the error that stopped it."""
+        return self.coupled.stopped
+
+    def advance_frame(self) -> None:
+        """Coupled steps of every world to the next multiple of the frame interval."""
+        end = (round(self.time / self.frame_interval) + 1) * self.frame_interval
+        while end - self.time > 0.5 * self.coupled.chemistry_steps * self.wave.dt:
+            self.coupled.step()
+
+    def world_frames(self) -> list:
+        """Every world's frame at the current time, as `QuasiStaticWaveRun.frame` (the series of `self.series`)."""
+        state = self.coupled.state.to_frame()
+        return [{name: values[s] for name, values in state.items() if name in self.series} for s in self._slices]
+
+    def record(self, frames: list) -> None:
+        """The chemical balance of every world and each running world's profile at the current frame."""
+        expected = [telegraph_total(total, rate, self.p.alpha, self.wave.dt, self.time) for total, rate in self.invariants]
+        self.balance.record(self.time, self.coupled.positions(), self.wave.concentration(), expected)
+        if self._profile is None:
+            return
+        for w, (view, frame) in enumerate(zip(self.views, frames)):
+            if w not in self.stopped:
+                view.profile_time = self.time
+                view.profiles.append((self.time, self._profile(view, frame["positions"])))
+
+    def run(self, progress=None, writers=None) -> list:
+        """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
+        (entered here), take each world's frames until it stops. Returns one result per world: status
+        ("done", or "stopped" with its error), the frames it completed (the first included), its
+        measurements and resolved parameters."""
+        stopped_after, stop_times = {}, {}  # world -> the frames it completed before it stopped; its time then
+        with contextlib.ExitStack() as stack:
+            for writer in writers or ():
+                stack.enter_context(writer)
+            self._record(writers, stopped_after)
+            for frame in range(self.frames):
+                try:
+                    self.advance_frame()
+                except FAILURES:  # every world has stopped
+                    break
+                finally:
+                    for w in self.stopped:
+                        stopped_after.setdefault(w, frame)
+                        stop_times.setdefault(w, self.time)
+                self._record(writers, stopped_after)
+                if progress is not None:
+                    progress(frame + 1)
+            results = [self.result(w, stopped_after.get(w, self.frames), stop_times.get(w, self.time))
+                       for w in range(self.worlds)]  # fmt: skip
+            for writer, result in zip(writers or (), results):
+                writer.set_measurements(result["measurements"])
+        return results
+
+    def _record(self, writers, stopped_after: dict) -> None:
+        frames = self.world_frames()
+        self.record(frames)
+        for w, frame in enumerate(frames):
+            if writers and w not in stopped_after:
+                writers[w].add_frame(self.time, frame)
+
+    def result(self, w: int, frames: int, time: float) -> dict:
+        stopped = self.stopped.get(w)
+        return {"status": "stopped" if stopped else "done", "stopped": str(stopped) if stopped else None,
+                "frames": frames + 1, "steps": self.steps, "parameters": self.resolved[w],
+                "measurements": self.measurements(w, time)}  # fmt: skip
+
+    def measurements(self, w: int, time: float) -> dict:
+        """World w's measurements, as its `QuasiStaticWaveRun.measurements` (a stopped world's at its stop)."""
+        x = self.coupled.positions()
+        frozen = self.coupled.frozen(w)
+        if frozen is not None:
+            x[self._slices[w]] = frozen["x"]
+        volumes = np.atleast_1d(self.shell.volume(x))
+        out = {"time": time, "volume": float(volumes[w]), **relaxation_measurements(self.coupled, w),
+               **self.balance.measurements(w)}  # fmt: skip
+        if self._measure is not None:
+            out.update(self._measure(self.views[w]))
+        return out
+
+
+def sphere_wave_batch(name: str, ps: list, *, seeds, initial=None, front_start: float = 0.0, device=None,
+                      report=print, profile=None, measure=None, end_fraction=1.0) -> QuasiStaticBatch:  # fmt: skip
+    """`sphere_wave_run`'s worlds as one batch: world w is ps[w] with its rest shape perturbed by
+    ps[w].noise × R, seeded by seeds[w]. Refuses what one batch cannot share: the adaptive step and
+    self-contact."""
+    ps, seeds = list(ps), [int(s) for s in seeds]
+    if len(seeds) != len(ps):
+        raise ValueError(f"a batch needs one seed per world: {len(seeds)} seeds for {len(ps)} parameter sets")
+    check_batch(ps)
+    p = ps[0]
+    for switch, why in (("adaptive_dt", "one dt steps every world"), ("self_contact", "the worlds share one space")):
+        if getattr(p, switch, False):
+            raise ValueError(f"a batch of {name} worlds needs --set {switch}=false ({why}); a world whose surface "
+                             "lowers the bound below dt, or that folds through itself, is then stopped alone")  # fmt: skip
+    R = p.radius
+    mesh = scene_mesh(None, lambda: icosphere(R, p.level), report, size=("level", p.level, icosphere), device=device)
+    meshes = [imperfect(mesh, q.noise * R, seed) for q, seed in zip(ps, seeds)]
+    if initial is None:
+        initial = {"kind": "gaussian", "sigma": p.width / R, "distance": "arc"}
+    return QuasiStaticBatch(name, meshes, ps, size=R, origin=np.array([0.0, 0.0, R]), initial=initial,
+                            t_end=p.t_end or end_fraction * math.pi * R / p.gamma, front_start=front_start,
+                            device=device, profile=profile, measure=measure, report=report)  # fmt: skip
