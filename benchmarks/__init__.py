@@ -1,5 +1,5 @@
 """Benchmarks, run as `wavewarp bench NAME` (or `python benchmarks/NAME.py`); each writes JSON (most a PNG chart too)."""
 
-NAMES = ("accuracy", "batch", "buckling_mobility", "buckling_stability", "chemistry", "limit_surface", "locomotion",
+NAMES = ("accuracy", "batch", "buckling_mobility", "buckling_phase_diagram", "buckling_stability", "chemistry", "limit_surface", "locomotion",
          "locomotion_ensemble", "numbering",
          "quick_identity", "shell", "speed", "stability", "sweep_scaling", "warp_libraries")  # fmt: skip  # modules with main(argv); numpy_shell is a baseline

@@ -1,10 +1,12 @@
 """Sweep scaling benchmark (docs/theory/sweeps.md): one sweep on 1, 2, 4, ... GPUs (or CPU workers).
 
     wavewarp bench sweep_scaling --device cuda --workers 1,2 --out benchmarks/results [--deterministic] [--kept-cluster]
+    wavewarp bench sweep_scaling --sweep fig-s1b --device cuda --workers 1,2 --deterministic
     wavewarp bench sweep_scaling --quick --device cpu --workers 1,2 --out DIR     # a CPU smoke run
 
-Runs the same sweep (default: the sphere walker at level 3 over 2 periods, AC ∈ {0, 0.1, 0.2, 0.3}
-× sensitive/insensitive × 2 seeds with noise 1e-3; `--quick`: cube-waves, 4 quick points) with the
+Runs the same sweep (default `--sweep locomotion`: the sphere walker at level 3 over 2 periods, AC ∈
+{0, 0.1, 0.2, 0.3} × sensitive/insensitive × 2 seeds with noise 1e-3; `fig-s1b`: buckling-modes over
+AI × thickness, 16 points as 4 batched runs; `--quick`: cube-waves, 4 quick points) with the
 embedded Dask cluster on the first N GPUs (CUDA_VISIBLE_DEVICES) or N CPU workers, for every N
 of `--workers`, each in a fresh process and folder, after one warm-up sweep that fills the kernel
 cache. Writes sweep_scaling_DEVICE[_deterministic].json: per N the wall time, the aggregate mechanics (or wave)
@@ -39,9 +41,15 @@ import matplotlib.pyplot as plt  # noqa: E402
 from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.io import write_json, write_png  # noqa: E402
 
-SWEEP = ["sphere-walker", "--grid", "AC=0,0.1,0.2,0.3", "--grid", "sensitive=true,false", "--seeds", "2",
-         "--set", "noise=1e-3", "--set", "level=3", "--set", "periods=2"]  # fmt: skip
-QUICK = ["cube-waves", "--quick", "--grid", "gamma=0.8,0.9,1.0,1.1"]
+SWEEPS = {
+    "locomotion": ["sphere-walker", "--grid", "AC=0,0.1,0.2,0.3", "--grid", "sensitive=true,false", "--seeds", "2",
+                   "--set", "noise=1e-3", "--set", "level=3", "--set", "periods=2"],
+    # Fig. S1b's sweep made small: 16 points in 4 batched runs of 4 worlds (level 3, the steep front to t = 12)
+    "fig-s1b": ["buckling-modes", "--grid", "AI=10.5,11.5,12.5,13.5", "--grid", "thickness=0.1,0.3,0.5,0.75",
+                "--set", "level=3", "--set", "k=3", "--set", "t_end=12", "--set", "relax_iterations=500",
+                "--set", "adaptive_dt=false", "--set", "self_contact=false", "--batch", "4"],
+    "quick": ["cube-waves", "--quick", "--grid", "gamma=0.8,0.9,1.0,1.1"],
+}  # fmt: skip
 TIMING = ("wall_time_s", "device")  # columns that may differ between equal runs
 
 
@@ -98,7 +106,10 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="wavewarp bench sweep_scaling", description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cuda", choices=("cpu", "cuda"))
     parser.add_argument("--workers", default="1,2", help="numbers of GPUs (or CPU workers), comma-separated")
-    parser.add_argument("--quick", action="store_true", help="4 quick cube-waves points (a CPU smoke run)")
+    parser.add_argument("--sweep", default="locomotion", choices=tuple(SWEEPS),
+                        help="locomotion: 16 sphere walkers; fig-s1b: 16 buckling-modes points in 4 batched runs; "
+                        "quick: 4 quick cube-waves points (a CPU smoke run)")  # fmt: skip
+    parser.add_argument("--quick", action="store_true", help="the same as --sweep quick")
     parser.add_argument("--deterministic", action="store_true",
                         help="bit-exact runs (wavewarp.device.set_deterministic) in every sweep")
     parser.add_argument("--kept-cluster", action="store_true",
@@ -107,9 +118,11 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     counts = sorted({int(n) for n in args.workers.split(",")})
     device = resolve_device("cuda:0" if args.device == "cuda" else "cpu")
-    arguments = (QUICK if args.quick else SWEEP) + (["--deterministic"] if args.deterministic else [])
+    sweep = "quick" if args.quick else args.sweep
+    arguments = SWEEPS[sweep] + (["--deterministic"] if args.deterministic else [])
     os.makedirs(args.out, exist_ok=True)
-    name = f"sweep_scaling_{device_tag(device)}{'_deterministic' if args.deterministic else ''}"
+    tag = "" if sweep in ("locomotion", "quick") else f"_{sweep.replace('-', '_')}"
+    name = f"sweep_scaling{tag}_{device_tag(device)}{'_deterministic' if args.deterministic else ''}"
     rows, reference = [], None
     with tempfile.TemporaryDirectory(prefix="wavewarp-sweep-scaling-") as scratch:
         result = {"benchmark": "sweep_scaling", **describe_device(device), "date": date.today().isoformat(),

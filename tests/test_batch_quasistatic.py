@@ -1,7 +1,12 @@
 """Batched quasi-static waves (wavewarp/quasistatic_batch.py, issue 28): buckling-modes worlds that
 differ in AI, h, AC, μV and seed relax together. The reference for each world is its own single run,
-computed here: in deterministic float64 the two agree bit for bit. A world that fails (its wave blows
-up, its surface lowers the stability bound below dt, or its relaxation fails) stops alone."""
+computed here: in deterministic float64 on the CPU the two agree bit for bit. On CUDA they agree to
+round-off (2e-14 R on an H200; a batch repeated is bitwise equal): some sum groups a world's terms
+differently beside other worlds. The suspects are the relaxation's atomic sums in Warp's run-to-run
+deterministic mode (walker batches, which do not relax, are bitwise on CUDA). A world that fails (its
+wave blows up, its surface lowers the stability bound below dt, or its relaxation fails) stops alone."""
+
+import functools
 
 import numpy as np
 import pytest
@@ -19,6 +24,22 @@ SMALL = {"level": 2, "frames": 3, "t_end": 3.0, "dtype": "float64", "adaptive_dt
 SPOIL_BUDGET = 100  # CG iterations per relaxation in the spoiling tests
 
 
+def assert_same(actual, expected, device):
+    """Bitwise on the CPU; to round-off (1e-12 relative) on CUDA."""
+    if device == "cpu":
+        np.testing.assert_array_equal(actual, expected)
+    else:
+        np.testing.assert_allclose(actual, expected, rtol=1e-12, atol=1e-12)
+
+
+def same_measurements(actual: dict, expected: dict, device) -> bool:
+    if device == "cpu":
+        return actual == expected
+    return actual.keys() == expected.keys() and all(
+        a == pytest.approx(e, rel=1e-9, abs=1e-12) if isinstance(e, float) else a == e
+        for a, e in zip(actual.values(), expected.values()))  # fmt: skip
+
+
 @pytest.fixture
 def deterministic():
     set_deterministic(True)
@@ -32,18 +53,19 @@ def worlds(**shared):
     return [resolve(scene.Parameters, None, [f"{k}={v}" for k, v in {**SMALL, **shared, **o}.items()]) for o in own]
 
 
-def test_each_world_of_a_quasi_static_batch_equals_its_single_run_bit_for_bit(deterministic):
+def test_each_world_of_a_quasi_static_batch_equals_its_single_run_bit_for_bit(deterministic, device):
     ps, seeds = worlds(), [0, 1]
-    batch = scene.build_batch(ps, seeds=seeds, device="cpu", report=QUIET)
+    batch = scene.build_batch(ps, seeds=seeds, device=device, report=QUIET)
     results = batch.run()
     x, c, n = batch.coupled.positions(), batch.wave.concentration(), batch.vertices
     for w, (p, seed) in enumerate(zip(ps, seeds)):
-        run = scene.build(p, device="cpu", seed=seed, report=QUIET)
+        run = scene.build(p, device=device, seed=seed, report=QUIET)
         outcome = simulate(run, [])
         assert outcome.failure is None and results[w]["status"] == "done"
-        np.testing.assert_array_equal(x[w * n:(w + 1) * n], run.coupled.positions())
-        np.testing.assert_array_equal(c[w * n:(w + 1) * n], run.wave.concentration())
-        assert results[w]["frames"] == run.frames + 1 and results[w]["measurements"] == outcome.measurements
+        assert_same(x[w * n:(w + 1) * n], run.coupled.positions(), device)
+        assert_same(c[w * n:(w + 1) * n], run.wave.concentration(), device)
+        assert results[w]["frames"] == run.frames + 1
+        assert same_measurements(results[w]["measurements"], outcome.measurements, device)
     assert not np.array_equal(x[:n], x[n:])  # the worlds did differ
 
 
@@ -69,17 +91,28 @@ def poison_rate(batch, n):
     batch.coupled.state.set("rate", rate)
 
 
+def spoil_worlds():
+    return worlds(overdamped=False, relax_iterations=SPOIL_BUDGET, dt=0.5, relax_every=2)
+
+
+@functools.cache
+def clean_batches(device):
+    """The spoiling tests' batch run without spoiling, once per device (inside a deterministic test)."""
+    clean = scene.build_batch(spoil_worlds(), seeds=[0, 1], device=device, report=QUIET)
+    clean.run()
+    return clean
+
+
 @pytest.mark.parametrize("spoil, message", [(poison_rate, "blew up"), (turn_inside_out, "relax stopped in world 1"),
                                             (shrink, "exceeds the stability bound")])  # fmt: skip
-def test_a_quasi_static_world_that_fails_stops_alone(deterministic, spoil, message):
+def test_a_quasi_static_world_that_fails_stops_alone(deterministic, device, spoil, message):
     """World 1 spoiled after the first frame (its wave's rate NaN: a blow-up; its positions mirrored: a
     relaxation over its budget; its surface shrunk: dt above its bound) stops with that error, its
-    frozen state the one it had when the failing step began; world 0 ends bitwise as in a batch without
+    frozen state the one it had when the failing step began; world 0 ends as in a batch without
     the spoiling (dt = 0.5, a sixth of the bound: a clean batch takes at most 68 of the iterations)."""
-    ps, seeds = worlds(overdamped=False, relax_iterations=SPOIL_BUDGET, dt=0.5, relax_every=2), [0, 1]
-    clean = scene.build_batch(ps, seeds=seeds, device="cpu", report=QUIET)
-    clean.run()
-    batch = scene.build_batch(ps, seeds=seeds, device="cpu", report=QUIET)
+    ps, seeds = spoil_worlds(), [0, 1]
+    clean = clean_batches(device)
+    batch = scene.build_batch(ps, seeds=seeds, device=device, report=QUIET)
     n, kept = batch.vertices, {}
 
     def spoil_after_first(frames):
@@ -90,8 +123,8 @@ def test_a_quasi_static_world_that_fails_stops_alone(deterministic, spoil, messa
     results = batch.run(progress=spoil_after_first)
     assert results[0]["status"] == "done" and results[0]["frames"] == batch.frames + 1
     assert results[1]["status"] == "stopped" and message in results[1]["stopped"] and results[1]["frames"] == 2
-    np.testing.assert_array_equal(batch.coupled.positions()[:n], clean.coupled.positions()[:n])
-    np.testing.assert_array_equal(batch.wave.concentration()[:n], clean.wave.concentration()[:n])
+    assert_same(batch.coupled.positions()[:n], clean.coupled.positions()[:n], device)
+    assert_same(batch.wave.concentration()[:n], clean.wave.concentration()[:n], device)
     frozen = batch.coupled.frozen(1)
     np.testing.assert_array_equal(frozen["x"], kept["x"])
     np.testing.assert_array_equal(frozen["c"], kept["c"])

@@ -552,3 +552,13 @@ def test_symmetry_number_finds_an_azimuthal_mode_and_ignores_the_axisymmetric_pr
     assert n == 5 and amplitude == pytest.approx(0.3, rel=0.05)
     n, amplitude = symmetry_number(run, rest + (bulge + ripple / 6)[:, None] * unit)
     assert n == 0 and amplitude == pytest.approx(0.05, rel=0.05)
+
+
+def test_buckling_modes_reads_the_onset_and_the_most_frequent_mode():
+    """A run that buckles into 6, coarsens to 3 and ends in a long oval reads n_onset 6, n_mode 2; a tie
+    goes to the smaller n; a run that never buckles reads 0 for both."""
+    from wavewarp.measurements import buckling_modes
+
+    assert buckling_modes([0, 0, 6, 5, 3, 3, 2, 2, 2, 0]) == {"n_onset": 6, "n_mode": 2}
+    assert buckling_modes([0, 4, 4, 3, 3]) == {"n_onset": 4, "n_mode": 3}
+    assert buckling_modes([0, 0, 0]) == {"n_onset": 0, "n_mode": 0}

@@ -48,7 +48,41 @@ def check_batch(ps: list) -> None:
                              "batch")  # fmt: skip
 
 
-class WalkerBatch(WaveClock):
+class WorldsRun(WaveClock):
+    """What a batched run's frames share: `run` steps every world frame by frame and reports each; the
+    run provides `frames`, `stopped` (world -> error), `advance_frame()`, `_record(writers, stopped_after)`
+    and `result(w, frames, time)`."""
+
+    def run(self, progress=None, writers=None) -> list:
+        """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
+        (wavewarp/trajectory.py; entered here), take each world's frames until it stops. Returns one result
+        per world: status ("done", or "stopped" with its error), the frames it completed (the first
+        included), its measurements (a stopped world's at its stop) and resolved parameters."""
+        stopped_after, stop_times = {}, {}  # world -> the frames it completed before it stopped; its time then
+        with contextlib.ExitStack() as stack:
+            for writer in writers or ():
+                stack.enter_context(writer)
+            self._record(writers, stopped_after)
+            for frame in range(self.frames):
+                try:
+                    self.advance_frame()
+                except FAILURES:  # every world has stopped
+                    break
+                finally:
+                    for w in self.stopped:
+                        stopped_after.setdefault(w, frame)
+                        stop_times.setdefault(w, self.time)
+                self._record(writers, stopped_after)
+                if progress is not None:
+                    progress(frame + 1)
+            results = [self.result(w, stopped_after.get(w, self.frames), stop_times.get(w, self.time))
+                       for w in range(self.worlds)]  # fmt: skip
+            for writer, result in zip(writers or (), results):
+                writer.set_measurements(result["measurements"])
+        return results
+
+
+class WalkerBatch(WorldsRun):
     """Walker worlds stepped together: `meshes` (one topology) and parameters `ps` one per world; `radius`,
     `size`, `origin`, `bilayer`, `rule` as `WalkerRun`'s. The worlds share the chemistry's and the
     mechanics' steps: the strictest world's bounds (ω the largest over every world)."""
@@ -168,32 +202,6 @@ class WalkerBatch(WaveClock):
         self.balance.record(self.time, self.dynamics.positions(), self.wave.concentration(),
                             self.initial_totals + produced)  # fmt: skip
 
-    def run(self, progress=None, writers=None) -> list:
-        """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
-        (wavewarp/trajectory.py; entered here), take each world's frames until it stops. Returns one result
-        per world: status ("done", or "stopped" with its error), the frames it completed (the first
-        included), its measurements and resolved parameters."""
-        stopped_after = {}  # world -> the frames it completed before it stopped
-        with contextlib.ExitStack() as stack:
-            for writer in writers or ():
-                stack.enter_context(writer)
-            self._record(writers, stopped_after)
-            for frame in range(self.frames):
-                try:
-                    self.advance_frame()
-                except FAILURES:  # every world has stopped
-                    break
-                finally:
-                    for w in self.stopped:
-                        stopped_after.setdefault(w, frame)
-                self._record(writers, stopped_after)
-                if progress is not None:
-                    progress(frame + 1)
-            results = [self.result(w, stopped_after.get(w, self.frames)) for w in range(self.worlds)]
-            for writer, result in zip(writers or (), results):
-                writer.set_measurements(result["measurements"])
-        return results
-
     def _record(self, writers, stopped_after: dict) -> None:
         """The balance of every world, and each running world's frame into its writer."""
         self.record()
@@ -202,16 +210,16 @@ class WalkerBatch(WaveClock):
                 if w not in stopped_after:
                     writers[w].add_frame(self.time, frame)
 
-    def result(self, w: int, frames: int) -> dict:
+    def result(self, w: int, frames: int, time: float) -> dict:
         stopped = self.stopped.get(w)
         return {"status": "stopped" if stopped else "done", "stopped": str(stopped) if stopped else None,
                 "frames": frames + 1, "steps": self.steps, "parameters": self.resolved[w],
-                "measurements": self.measurements(w)}  # fmt: skip
+                "measurements": self.measurements(w, time)}  # fmt: skip
 
-    def measurements(self, w: int) -> dict:
-        """World w's measurements, as its `WalkerRun.measurements`."""
+    def measurements(self, w: int, time: float) -> dict:
+        """World w's measurements, as its `WalkerRun.measurements` (a stopped world's time its stop)."""
         placed = self.placed[w]
-        return {"time": self.time, "mechanics_steps": self.steps * self.coupled.substeps,
+        return {"time": time, "mechanics_steps": self.steps * self.coupled.substeps,
                 "contact_depth_R": placed.depth / self.radius, **self.balance.measurements(w),
                 **arrival_measurements(self.arrival.times(self.wave.dt)[self._slices[w]]),
                 **locomotion(self.traces[w], placed.forward, self.radius, self.rest_heights[w],

@@ -184,17 +184,23 @@ def shape_asymmetry(run, x) -> tuple:
     return best
 
 
+def buckling_modes(numbers) -> dict:
+    """A run's buckling modes from its frames' symmetry numbers: `n_onset`, the first nonzero (the mode
+    the shell buckles into), and `n_mode`, the one most frames read (the smaller of a tie); 0 when no
+    frame buckled (a phase diagram's entries)."""
+    buckled = [int(n) for n in numbers if n]
+    return {"n_onset": buckled[0] if buckled else 0,
+            "n_mode": max(sorted(set(buckled)), key=buckled.count) if buckled else 0}  # fmt: skip
+
+
 def buckling_measurements(run) -> dict:
-    """The frames' symmetry numbers n at the front; the largest; `n_mode`, the n most frames read
-    (the smaller of a tie; 0 when no frame buckled: a phase diagram's entry); `amplitude_max_h`, the
-    largest ring amplitude over the frames (units of h)."""
+    """The frames' symmetry numbers n at the front, the largest, `buckling_modes`, and `amplitude_max_h`,
+    the largest ring amplitude over the frames (units of h)."""
     n = [int(value[0]) for _, value in run.profiles]
     times = [t for t, _ in run.profiles]
     k = int(np.argmax(n)) if n else 0
-    buckled = [m for m in n if m]
     return {"symmetry_numbers": n, "n_max": n[k] if n else 0, "t_n_max": times[k] if n else None,
-            "n_mode": max(sorted(set(buckled)), key=buckled.count) if buckled else 0,
-            "amplitude_max_h": max((float(value[1]) for _, value in run.profiles), default=0.0),
+            **buckling_modes(n), "amplitude_max_h": max((float(value[1]) for _, value in run.profiles), default=0.0),
             "t_front_at_equator": (0.5 * math.pi * run.size - run.front_start) / run.p.gamma}  # fmt: skip
 
 

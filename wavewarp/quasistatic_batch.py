@@ -18,21 +18,19 @@ worlds share one space).
 
 from __future__ import annotations
 
-import contextlib
 import math
 from dataclasses import replace
 
 import numpy as np
 
 from .balance import ChemicalBalance
-from .batch import check_batch
+from .batch import WorldsRun, check_batch
 from .chemistry import telegraph_total
-from .driver import FAILURES
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh, icosphere
 from .parameters import as_dict
 from .quasistatic import frame_clock, initial_values, quasi_static_coupling, quasi_static_model, relaxation_measurements
-from .runs import WaveClock, imperfect, mean_edge, scene_mesh
+from .runs import imperfect, mean_edge, scene_mesh
 
 
 class WorldView:
@@ -44,7 +42,7 @@ class WorldView:
         self.profiles, self.profile_time = [], 0.0
 
 
-class QuasiStaticBatch(WaveClock):
+class QuasiStaticBatch(WorldsRun):
     """Quasi-static wave worlds stepped together: `meshes` (one topology) and parameters `ps`, one per
     world; `size`, `origin`, `initial`, `t_end`, `rule`, `profile`, `measure` as QuasiStaticWaveRun's.
     The worlds share the wave's dt (the strictest world's bound) and its relaxation schedule."""
@@ -109,34 +107,6 @@ class QuasiStaticBatch(WaveClock):
             if w not in self.stopped:
                 view.profile_time = self.time
                 view.profiles.append((self.time, self._profile(view, frame["positions"])))
-
-    def run(self, progress=None, writers=None) -> list:
-        """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
-        (entered here), take each world's frames until it stops. Returns one result per world: status
-        ("done", or "stopped" with its error), the frames it completed (the first included), its
-        measurements and resolved parameters."""
-        stopped_after, stop_times = {}, {}  # world -> the frames it completed before it stopped; its time then
-        with contextlib.ExitStack() as stack:
-            for writer in writers or ():
-                stack.enter_context(writer)
-            self._record(writers, stopped_after)
-            for frame in range(self.frames):
-                try:
-                    self.advance_frame()
-                except FAILURES:  # every world has stopped
-                    break
-                finally:
-                    for w in self.stopped:
-                        stopped_after.setdefault(w, frame)
-                        stop_times.setdefault(w, self.time)
-                self._record(writers, stopped_after)
-                if progress is not None:
-                    progress(frame + 1)
-            results = [self.result(w, stopped_after.get(w, self.frames), stop_times.get(w, self.time))
-                       for w in range(self.worlds)]  # fmt: skip
-            for writer, result in zip(writers or (), results):
-                writer.set_measurements(result["measurements"])
-        return results
 
     def _record(self, writers, stopped_after: dict) -> None:
         frames = self.world_frames()
