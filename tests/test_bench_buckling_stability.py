@@ -28,6 +28,7 @@ def test_buckling_stability_runs_and_writes_its_rows(tmp_path, capsys):
     assert "the path stays stable" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # a benchmark's smoke run
 def test_buckling_stability_analyses_a_stored_trajectory_and_refuses_one_with_self_contact(tmp_path, capsys):
     """--h5: the frames of `wavewarp run` (here a coarse quick run), analysed on its stored rest mesh;
     frames relaxed with self-contact are refused (the Hessian has no contact term)."""

@@ -10,6 +10,7 @@ from wavewarp.benchmarks import numbering
 from wavewarp.cli import main as cli
 
 
+@pytest.mark.slow  # a benchmark's smoke run
 def test_bench_numbering_quick_writes_a_row_per_level_and_variant(tmp_path):
     assert cli(["bench", "numbering", "--quick", "--device", "cpu", "--out", str(tmp_path)]) == 0
     result = json.loads((tmp_path / "numbering_cpu.json").read_text())

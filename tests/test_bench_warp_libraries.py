@@ -96,6 +96,7 @@ def test_bsr_mv_and_ours_equal_scipy_k_times_x(dtype):
                 assert np.allclose(y, host_K @ x, rtol=0, atol=1e-12 * np.abs(reference).max()), (kind, name)
 
 
+@pytest.mark.slow  # a benchmark's smoke run
 def test_quick_run_writes_a_row_per_configuration(tmp_path):
     assert bench.main(["--quick", "--device", "cpu", "--out", str(tmp_path), "--repeats", "1"]) == 0
     result = json.loads((tmp_path / "warp_libraries.json").read_text())
