@@ -145,10 +145,13 @@ def sphere_wave_batch(name: str, ps: list, *, seeds, initial=None, front_start: 
         raise ValueError(f"a batch needs one seed per world: {len(seeds)} seeds for {len(ps)} parameter sets")
     check_batch(ps)
     p = ps[0]
-    for switch, why in (("adaptive_dt", "one dt steps every world"), ("self_contact", "the worlds share one space")):
+    refused = {"adaptive_dt": "one dt steps every world: a world whose surface lowers the bound below it is "
+                              "stopped alone",
+               "self_contact": "the worlds overlap in space, and self-contact would push them apart"}  # fmt: skip
+    for switch, why in refused.items():
         if getattr(p, switch, False):
-            raise ValueError(f"a batch of {name} worlds needs --set {switch}=false ({why}); a world whose surface "
-                             "lowers the bound below dt, or that folds through itself, is then stopped alone")  # fmt: skip
+            raise ValueError(f"a batch of {name} worlds needs --set {switch}=false ({why}), or run the points one "
+                             "by one (--batch 1)")  # fmt: skip
     R = p.radius
     mesh = scene_mesh(None, lambda: icosphere(R, p.level), report, size=("level", p.level, icosphere), device=device)
     meshes = [imperfect(mesh, q.noise * R, seed) for q, seed in zip(ps, seeds)]
