@@ -87,6 +87,7 @@ class QuasiStatic:
         self.relax_iterations = []  # CG iterations per relaxation (one world; a batch: an array per relaxation)
         self.stopped = {}  # batched worlds: world -> the error that stopped it
         self._frozen = {}  # world -> its state arrays' share at the start of the step it failed in
+        self._step_start = None  # batched worlds: the state at the start of the current step
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
         wave.state.x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
         self._equilibrate(initial=True, start=self._start_of_step())
@@ -102,8 +103,16 @@ class QuasiStatic:
         return self.state.numpy("x")
 
     def _start_of_step(self):
-        """Batched worlds: copies of the state arrays, where a world that fails in this step stops."""
-        return [wp.clone(a) for a in self.state.arrays()] if self.worlds > 1 else None
+        """Batched worlds: copies of the state arrays (allocated once), where a world that fails in this
+        step stops."""
+        if self.worlds == 1:
+            return None
+        arrays = self.state.arrays()
+        if self._step_start is None or [c.shape for c in self._step_start] != [a.shape for a in arrays]:
+            self._step_start = [wp.empty_like(a) for a in arrays]
+        for copy, array in zip(self._step_start, arrays):
+            wp.copy(copy, array)
+        return self._step_start
 
     def _equilibrate(self, initial: bool = False, start=None) -> None:
         x, shell = self.state.x, self.shell
@@ -201,8 +210,11 @@ class QuasiStatic:
             except (BlowUpError, TimeStepError) as error:
                 if self.worlds == 1:
                     raise
-                if isinstance(error, TimeStepError):
-                    failed = np.flatnonzero(self.wave.solver.world_stable_dts(self.worlds) < self.wave.dt)
+                if isinstance(error, TimeStepError):  # below dt; else the lowest (within the estimate's tolerance)
+                    bounds = self.wave.solver.world_stable_dts(self.worlds)
+                    bounds[list(self.stopped)] = np.inf
+                    failed = np.flatnonzero(bounds < self.wave.dt)
+                    failed = failed if len(failed) else [int(np.argmin(bounds))]
                 else:
                     failed = np.flatnonzero(self.wave.solver.flag.numpy())
                 failed = [int(w) for w in failed if int(w) not in self.stopped]
