@@ -50,8 +50,8 @@ def check_batch(ps: list) -> None:
 
 class WorldsRun(WaveClock):
     """What a batched run's frames share: `run` steps every world frame by frame and reports each; the
-    run provides `frames`, `stopped` (world -> error), `advance_frame()`, `_record(writers, stopped_after)`
-    and `result(w, frames, time)`."""
+    run provides `frames`, `stopped` (world -> error), `resolved` (per world), `advance_frame()`,
+    `_record(writers, stopped_after)` and `measurements(w, time)`."""
 
     def run(self, progress=None, writers=None) -> list:
         """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
@@ -80,6 +80,14 @@ class WorldsRun(WaveClock):
             for writer, result in zip(writers or (), results):
                 writer.set_measurements(result["measurements"])
         return results
+
+    def result(self, w: int, frames: int, time: float) -> dict:
+        """World w's result: status, its error if stopped, the frames it completed, its parameters and
+        measurements."""
+        stopped = self.stopped.get(w)
+        return {"status": "stopped" if stopped else "done", "stopped": str(stopped) if stopped else None,
+                "frames": frames + 1, "steps": self.steps, "parameters": self.resolved[w],
+                "measurements": self.measurements(w, time)}  # fmt: skip
 
 
 class WalkerBatch(WorldsRun):
@@ -209,12 +217,6 @@ class WalkerBatch(WorldsRun):
             for w, frame in enumerate(self.world_frames()):
                 if w not in stopped_after:
                     writers[w].add_frame(self.time, frame)
-
-    def result(self, w: int, frames: int, time: float) -> dict:
-        stopped = self.stopped.get(w)
-        return {"status": "stopped" if stopped else "done", "stopped": str(stopped) if stopped else None,
-                "frames": frames + 1, "steps": self.steps, "parameters": self.resolved[w],
-                "measurements": self.measurements(w, time)}  # fmt: skip
 
     def measurements(self, w: int, time: float) -> dict:
         """World w's measurements, as its `WalkerRun.measurements` (a stopped world's time its stop)."""

@@ -115,12 +115,6 @@ class QuasiStaticBatch(WorldsRun):
             if writers and w not in stopped_after:
                 writers[w].add_frame(self.time, frame)
 
-    def result(self, w: int, frames: int, time: float) -> dict:
-        stopped = self.stopped.get(w)
-        return {"status": "stopped" if stopped else "done", "stopped": str(stopped) if stopped else None,
-                "frames": frames + 1, "steps": self.steps, "parameters": self.resolved[w],
-                "measurements": self.measurements(w, time)}  # fmt: skip
-
     def measurements(self, w: int, time: float) -> dict:
         """World w's measurements, as its `QuasiStaticWaveRun.measurements` (a stopped world's at its stop)."""
         x = self.coupled.positions()
