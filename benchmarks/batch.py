@@ -20,7 +20,14 @@ noise per world) with their own AC (0.1 … 0.3) relax from rest under c = 0.5 b
 world with its own line search and convergence (`Shell.relax` on the union), against the same
 relaxations one after another; the batch runs until its slowest world converges, so its CG passes
 are the largest world's count. Timed on the second relaxation of each shell (the first compiles and
-captures the loop). Writes batch_<device>.json and batch_<device>.png.
+captures the loop).
+
+The scene rows (`--scenes`): N worlds of the `buckling-modes` scene (the steep front, k = 3, with AI
+from 10.5 to 13.5 over the worlds, seeded noise; `adaptive_dt` and `self_contact` off, 4 frames to
+t = 4) as one batched run (`build_batch`, then `run`), against min(N, 2) of the same worlds run one
+after another through the scene's own `build` and the driver; both timed from build to the last
+frame, after a first run that compiles. A batch runs each relaxation until its slowest world
+converges. Writes batch_<device>.json and batch_<device>.png.
 """
 
 from __future__ import annotations
@@ -38,12 +45,14 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from speed import WALKER, koiter_counts, machine_peaks, seconds_per_call, walker_ground  # noqa: E402
 
 from wavewarp.coupled import Walking  # noqa: E402
+from wavewarp.driver import simulate  # noqa: E402
 from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.dynamics import ShellDynamics  # noqa: E402
 from wavewarp.initial import gaussian_pulse  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
 from wavewarp.mesh import Mesh, icosphere  # noqa: E402
+from wavewarp.parameters import load_scene, resolve  # noqa: E402
 from wavewarp.runs import imperfect, mean_edge  # noqa: E402
 from wavewarp.shell import Shell  # noqa: E402
 from wavewarp.walker import bound_over_reference_range, ground_lift  # noqa: E402
@@ -167,6 +176,49 @@ def relaxation_rows(level: int, worlds: list, device, dtype: str, noise: float) 
     return rows
 
 
+def scene_worlds(level: int, count: int, dtype: str, frames: int, t_end: float) -> tuple:
+    """(scene module, parameters, seeds) of `count` buckling-modes worlds, AI from 10.5 to 13.5."""
+    module = load_scene("buckling-modes")
+    fixed = [f"level={level}", "k=3", "adaptive_dt=false", "self_contact=false", f"frames={frames}", f"t_end={t_end}",
+             f"dtype={dtype}"]  # fmt: skip
+    ps = [resolve(module.Parameters, None, [*fixed, f"AI={a}"]) for a in np.linspace(10.5, 13.5, count)]
+    return module, ps, list(range(count))
+
+
+def scene_seconds(module, ps: list, seeds: list, device) -> tuple:
+    """(seconds, wave steps) from build to the last frame: one batched run of the worlds, or (one world) the
+    scene's single run through the driver."""
+    start = time.perf_counter()
+    if len(ps) > 1:
+        batch = module.build_batch(ps, seeds=seeds, device=device, report=lambda message: None)
+        results = batch.run()
+        assert all(r["status"] == "done" for r in results), [r["stopped"] for r in results]
+        return time.perf_counter() - start, batch.steps
+    run = module.build(ps[0], device=device, seed=seeds[0], report=lambda message: None)
+    outcome = simulate(run, [])
+    assert outcome.failure is None, outcome.failure
+    return time.perf_counter() - start, run.steps
+
+
+def scene_rows(level: int, worlds: list, device, dtype: str, frames: int = 4, t_end: float = 4.0) -> list:
+    module, ps, seeds = scene_worlds(level, max(worlds), dtype, frames, t_end)
+    scene_seconds(module, ps[:2], seeds[:2], device)  # compiles both paths' kernels
+    scene_seconds(module, ps[:1], seeds[:1], device)
+    alone = [scene_seconds(module, ps[w:w + 1], seeds[w:w + 1], device)[0] for w in range(min(2, max(worlds)))]
+    seconds_per_world = float(np.mean(alone))
+    rows = []
+    for n in worlds:
+        seconds, steps = scene_seconds(module, ps[:n], seeds[:n], device)
+        row = dict(kind="scene", scene=module.NAME, level=level, worlds=n, triangles_per_world=20 * 4**level,
+                   triangles=n * 20 * 4**level, dtype=dtype, seconds=seconds, wave_steps=steps,
+                   world_runs_per_second=n / seconds, sequential_world_runs_per_second=1 / seconds_per_world,
+                   speedup_vs_sequential=n * seconds_per_world / seconds)  # fmt: skip
+        rows.append(row)
+        print(f"level {level} {n:4d} {module.NAME} worlds ({row['triangles']:>8d} tri) {dtype}: {seconds:8.2f} s, "
+              f"x{row['speedup_vs_sequential']:.1f} vs one after another ({seconds_per_world:.2f} s each)", flush=True)  # fmt: skip
+    return rows
+
+
 def chart(result: dict, path: str) -> None:
     import matplotlib
 
@@ -189,6 +241,11 @@ def chart(result: dict, path: str) -> None:
         rows = [r for r in relaxations if r["level"] == level]
         right.semilogx([r["worlds"] for r in rows], [r["speedup_vs_sequential"] for r in rows], "^:", color=f"C{k + 2}",
                        label=f"relaxations, {rows[0]['triangles_per_world']:,} triangles per world")  # fmt: skip
+    scenes = [r for r in result["rows"] if r.get("kind") == "scene"]
+    for k, level in enumerate(sorted({r["level"] for r in scenes})):
+        rows = [r for r in scenes if r["level"] == level]
+        right.semilogx([r["worlds"] for r in rows], [r["speedup_vs_sequential"] for r in rows], "v-.", color=f"C{k + 4}",
+                       label=f"{rows[0]['scene']} runs, {rows[0]['triangles_per_world']:,} triangles per world")  # fmt: skip
     left.set_xlabel("worlds N")
     left.set_ylabel("mechanics world-steps per second")
     left.set_title(f"sphere walkers, {result['device_name']}")
@@ -214,6 +271,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--relaxations", action="store_true", help="also the quasi-static rows (batched relaxations)")
     parser.add_argument("--no-walkers", action="store_true", help="skip the walker rows")
+    parser.add_argument("--scenes", action="store_true", help="also whole buckling-modes runs (batched scene worlds)")
     parser.add_argument("--quick", action="store_true", help="level 1, 1 and 3 worlds, short timings (smoke test)")
     args = parser.parse_args(argv)
     wp.config.log_level = wp.LOG_WARNING
@@ -227,6 +285,10 @@ def main(argv=None) -> int:
             rows += level_rows(level, fitting, device.alias, args.dtype, budget, peaks, args.noise)
         if args.relaxations or args.quick:
             rows += relaxation_rows(level, fitting, device.alias, args.dtype, args.noise)
+        if args.scenes and not args.quick:
+            rows += scene_rows(level, fitting, device.alias, args.dtype)
+    if args.quick:  # the scene's rows at level 2 (the smallest icosphere its tables take), one frame
+        rows += scene_rows(2, worlds, device.alias, args.dtype, frames=1, t_end=1.0)
     result = dict(benchmark="batch", date=date.today().isoformat(), **describe_device(device), peaks=peaks, rows=rows)
     write_result(result, args.out, f"batch_{device_tag(device)}", chart)
     return 0

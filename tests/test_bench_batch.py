@@ -20,6 +20,11 @@ def test_bench_batch_quick_writes_json_and_chart(tmp_path):
         assert row["iterations_max"] >= row["iterations_mean"] > 0
         assert row["speedup_vs_sequential"] == pytest.approx(row["world_relaxations_per_second"]
                                                              / row["sequential_world_relaxations_per_second"])  # fmt: skip
+    scenes = [r for r in result["rows"] if r["kind"] == "scene"]
+    assert [(r["worlds"], r["level"], r["scene"]) for r in scenes] == [(1, 2, "buckling-modes"), (3, 2, "buckling-modes")]
+    for row in scenes:
+        assert row["wave_steps"] > 0 and row["speedup_vs_sequential"] == pytest.approx(
+            row["world_runs_per_second"] / row["sequential_world_runs_per_second"])  # fmt: skip
     for row in rows:
         assert row["triangles"] == row["worlds"] * row["triangles_per_world"] == row["worlds"] * 80
         assert row["world_steps_per_second"] == pytest.approx(row["worlds"] * row["steps_per_second"])
