@@ -54,7 +54,8 @@ def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype
                         search: wp.array(dtype=wp.float64),
                         flags: wp.array(dtype=wp.int32), history: wp.array(dtype=wp.float64)):  # fmt: skip
     """One thread per world: first step length 1 along d = s; the world stops at once if x is
-    already in equilibrium."""
+    already in equilibrium, or (NO_DESCENT, residual infinite) if its energy is not finite (NaN
+    positions: max |F| skips NaN and would read as converged)."""
     w = wp.tid()
     b, f = w * SEARCH_SIZE, w * FLAGS_SIZE
     fs = wp.float64(sums[3 * w + FS_SUM])
@@ -74,6 +75,9 @@ def start_search_kernel(energy: wp.array(dtype=wp.float64), sums: wp.array(dtype
     history[w * (history.shape[0] // largest.shape[0])] = energy[w]
     converged = search[b + RESIDUAL] <= search[b + TOL]
     flags[f + STATUS] = wp.where(converged, CONVERGED, RUNNING)
+    if not wp.isfinite(energy[w]):
+        search[b + RESIDUAL] = wp.float64(wp.inf)
+        flags[f + STATUS] = NO_DESCENT
 
 
 @wp.kernel

@@ -85,6 +85,12 @@ def turn_inside_out(batch, n):
     batch.coupled.state.set("x", x)
 
 
+def poison_positions(batch, n):
+    x = batch.coupled.positions()
+    x[n + 5] = np.nan
+    batch.coupled.state.set("x", x)
+
+
 def poison_rate(batch, n):
     rate = batch.coupled.state.numpy("rate")
     rate[n + 5] = np.nan
@@ -104,10 +110,12 @@ def clean_batches(device):
 
 
 @pytest.mark.parametrize("spoil, message", [(poison_rate, "blew up"), (turn_inside_out, "relax stopped in world 1"),
-                                            (shrink, "exceeds the stability bound")])  # fmt: skip
+                                            (shrink, "exceeds the stability bound"),
+                                            (poison_positions, "the energy is not finite")])  # fmt: skip
 def test_a_quasi_static_world_that_fails_stops_alone(deterministic, device, spoil, message):
     """World 1 spoiled after the first frame (its wave's rate NaN: a blow-up; its positions mirrored: a
-    relaxation over its budget; its surface shrunk: dt above its bound) stops with that error, its
+    relaxation over its budget; its surface shrunk: dt above its bound; a position NaN: a relaxation
+    whose energy is not finite) stops with that error, its
     frozen state the one it had when the failing step began; world 0 ends as in a batch without
     the spoiling (dt = 0.5, a sixth of the bound: a clean batch takes at most 68 of the iterations)."""
     ps, seeds = spoil_worlds(), [0, 1]
@@ -137,3 +145,16 @@ def test_a_quasi_static_batch_refuses_the_adaptive_step_and_self_contact():
         ps = worlds(**{switch: True})
         with pytest.raises(ValueError, match=f"--set {switch}=false"):
             scene.build_batch(ps, seeds=[0, 0], device="cpu", report=QUIET)
+
+
+def test_an_overdamped_shell_does_not_accept_positions_that_are_not_finite():
+    """The overdamped coupling accepts a relaxation that spent its budget, never one from NaN positions
+    (max |F| skips NaN: without the energy's check it would read as converged)."""
+    from wavewarp.relax import RelaxationError
+
+    run = scene.build(worlds(overdamped=True)[0], device="cpu", report=QUIET)
+    x = run.coupled.positions()
+    x[5] = np.nan
+    run.coupled.state.set("x", x)
+    with pytest.raises(RelaxationError, match="the energy is not finite"):
+        run.coupled.step()

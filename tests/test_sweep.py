@@ -195,12 +195,16 @@ def test_a_dask_sweep_killed_midway_resumes_with_the_missing_points(tmp_path):
     command = [sys.executable, "-m", "wavewarp.cli", "sweep", "starfish", "--quick", "--grid", "gamma=0.8,0.9,1.0,1.1",
                "--device", "cpu", "--workers", "1", "--out", str(out)]  # fmt: skip
     first = subprocess.Popen(command, start_new_session=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    while not (out / "points").is_dir() or not any(name.endswith(".json") for name in os.listdir(out / "points")):
+
+    def results():  # not the temporary siblings (.NAME.PID.*.tmp.json) a write in progress leaves
+        return sorted(n for n in os.listdir(out / "points") if n.endswith(".json") and not n.startswith("."))
+
+    while not (out / "points").is_dir() or not results():
         assert first.poll() is None, first.communicate()
         time.sleep(0.1)
     os.killpg(first.pid, signal.SIGKILL)
     first.wait()
-    kept = sorted(name for name in os.listdir(out / "points") if name.endswith(".json"))
+    kept = results()
     assert 1 <= len(kept) < 4
     times = {name: os.path.getmtime(out / "points" / name) for name in kept}
     again = subprocess.run(command, capture_output=True, text=True, check=True)

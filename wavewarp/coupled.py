@@ -124,7 +124,11 @@ class QuasiStatic:
                   newton_steps=self.newton_steps)  # device to device
         except RelaxationError as error:
             for w, (residual, round_off) in error.failures.items():
-                if round_off and residual <= ROUND_OFF_SLACK * self.tol:
+                if not math.isfinite(residual):  # not finite positions: no overdamped lag accepts them
+                    if self.worlds == 1:
+                        raise
+                    failed.append(w)
+                elif round_off and residual <= ROUND_OFF_SLACK * self.tol:
                     self.tallies["round_off_relaxations"][w] += 1  # the dtype's floor just above tol (float32)
                 elif self.overdamped:
                     # overdamped: the shell lags its reference (budget spent, or no lower energy found at a

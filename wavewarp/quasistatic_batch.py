@@ -119,10 +119,11 @@ class QuasiStaticBatch(WorldsRun):
         """World w's measurements, as its `QuasiStaticWaveRun.measurements` (a stopped world's at its stop)."""
         x = self.coupled.positions()
         frozen = self.coupled.frozen(w)
-        if frozen is not None:
+        finite = frozen is None or np.all(np.isfinite(frozen["x"]))  # a world stopped on NaN positions has none
+        if frozen is not None and finite:
             x[self._slices[w]] = frozen["x"]
-        volumes = np.atleast_1d(self.shell.volume(x))
-        out = {"time": time, "volume": float(volumes[w]), **relaxation_measurements(self.coupled, w),
+        volume = float(np.atleast_1d(self.shell.volume(x))[w]) if finite else float("nan")
+        out = {"time": time, "volume": volume, **relaxation_measurements(self.coupled, w),
                **self.balance.measurements(w)}  # fmt: skip
         if self._measure is not None:
             out.update(self._measure(self.views[w]))

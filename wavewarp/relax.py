@@ -229,7 +229,8 @@ class Relaxation:
         raise RelaxationError(
             f"relax stopped {where}after {iterations[w]} iterations at residual max|F|/(Y h ℓ̄) = {residual:.3g}, "
             f"{residual / tol:.3g}× the tolerance {tol:g}"
-            + (" (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
+            + (" (the energy is not finite: the positions hold NaN or Inf)" if not np.isfinite(residual) else
+               " (the line search found no lower energy: round-off floor; use dtype='float64' or a larger tol)"
                if round_off else "; raise max_iterations or tol"),  # fmt: skip
             residual, x, round_off=round_off, iterations=int(iterations[w]),
             worlds=None if worlds == 1 else failed.tolist(),
@@ -266,7 +267,7 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
         return _conjugate_gradients(shell, x, tol, max_iterations, callback, out)
     except RelaxationError as error:
         floor = error.round_off and error.residual <= ROUND_OFF_SLACK * tol
-        if method == "ncg" or floor or shell.self_contact is not None:
+        if method == "ncg" or floor or shell.self_contact is not None or not np.isfinite(error.residual):
             raise
         history = list(shell.relax_history)
         return _newton(shell, error.x, tol, newton_steps, callback, out, history[:-1], error.iterations)
