@@ -28,7 +28,7 @@ from .checks import count
 from .dynamics import ShellDynamics
 from .kernels.dynamics import eval_reference_ramp
 from .relax import NEWTON_STEPS, ROUND_OFF_SLACK, RelaxationError, checked_method, relax
-from .runner import GuardedRunner
+from .runner import GuardedRunner, world_shares
 from .shell import Shell
 from .state import FIELDS, State
 from .waves import BlowUpError, TimeStepError, _Stepper
@@ -124,13 +124,10 @@ class QuasiStatic:
                   newton_steps=self.newton_steps)  # device to device
         except RelaxationError as error:
             for w, (residual, round_off) in error.failures.items():
-                if not math.isfinite(residual):  # not finite positions: no overdamped lag accepts them
-                    if self.worlds == 1:
-                        raise
-                    failed.append(w)
-                elif round_off and residual <= ROUND_OFF_SLACK * self.tol:
+                finite = math.isfinite(residual)  # not finite positions: no overdamped lag accepts them
+                if finite and round_off and residual <= ROUND_OFF_SLACK * self.tol:
                     self.tallies["round_off_relaxations"][w] += 1  # the dtype's floor just above tol (float32)
-                elif self.overdamped:
+                elif finite and self.overdamped:
                     # overdamped: the shell lags its reference (budget spent, or no lower energy found at a
                     # sharp fold); the next step goes on from here
                     self.tallies["unconverged_relaxations"][w] += 1
@@ -160,12 +157,7 @@ class QuasiStatic:
         n = self.shell.mesh.vertices_per_world
         for w in worlds:
             self.stopped[w] = error
-            shares = []
-            for copy in start:
-                share = wp.empty(len(copy) // self.worlds, dtype=copy.dtype, device=copy.device)
-                wp.copy(share, copy, src_offset=w * len(share), count=len(share))
-                shares.append(share)
-            self._frozen[w] = shares
+            self._frozen[w] = world_shares(start, w, self.worlds)
             for array in self.state.arrays():
                 size = len(array) // self.worlds
                 array[w * size:(w + 1) * size].zero_()

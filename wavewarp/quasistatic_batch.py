@@ -92,15 +92,15 @@ class QuasiStaticBatch(WorldsRun):
         while end - self.time > 0.5 * self.coupled.chemistry_steps * self.wave.dt:
             self.coupled.step()
 
-    def world_frames(self) -> list:
-        """Every world's frame at the current time, as `QuasiStaticWaveRun.frame` (the series of `self.series`)."""
-        state = self.coupled.state.to_frame()
+    def world_frames(self, state: dict) -> list:
+        """Every world's frame of the batch's `state.to_frame()`, as `QuasiStaticWaveRun.frame` (the series
+        of `self.series`)."""
         return [{name: values[s] for name, values in state.items() if name in self.series} for s in self._slices]
 
-    def record(self, frames: list) -> None:
+    def record(self, state: dict, frames: list) -> None:
         """The chemical balance of every world and each running world's profile at the current frame."""
         expected = [telegraph_total(total, rate, self.p.alpha, self.wave.dt, self.time) for total, rate in self.invariants]
-        self.balance.record(self.time, self.coupled.positions(), self.wave.concentration(), expected)
+        self.balance.record(self.time, state["positions"], state["concentration"], expected)
         if self._profile is None:
             return
         for w, (view, frame) in enumerate(zip(self.views, frames)):
@@ -109,8 +109,9 @@ class QuasiStaticBatch(WorldsRun):
                 view.profiles.append((self.time, self._profile(view, frame["positions"])))
 
     def _record(self, writers, stopped_after: dict) -> None:
-        frames = self.world_frames()
-        self.record(frames)
+        state = self.coupled.state.to_frame()  # one read of the device state per frame
+        frames = self.world_frames(state)
+        self.record(state, frames)
         for w, frame in enumerate(frames):
             if writers and w not in stopped_after:
                 writers[w].add_frame(self.time, frame)

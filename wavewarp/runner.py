@@ -18,6 +18,17 @@ from .checks import count, finite, plain, positive
 from .device import run_steps
 
 
+def world_shares(arrays: list, world: int, worlds: int) -> list:
+    """Copies of world `world`'s share (the world-th of `worlds` equal blocks) of each of `arrays`."""
+    copies = []
+    for array in arrays:
+        n = len(array) // worlds
+        copy = wp.empty(n, dtype=array.dtype, device=array.device)
+        wp.copy(copy, array, src_offset=world * n, count=n)
+        copies.append(copy)
+    return copies
+
+
 class GuardedRunner:
     """Runs `step()` in guarded chunks. `protected()` lists the arrays to back up (called per chunk, so
     it may change); `reset()` clears the flags before a chunk; `check(chunk)` returns an exception or
@@ -35,13 +46,7 @@ class GuardedRunner:
 
     def world_backup(self, world: int, worlds: int) -> list:
         """Copies of world `world`'s share (of `worlds` equal blocks) of the last chunk's backups."""
-        copies = []
-        for backup in self._backups:
-            n = len(backup) // worlds
-            copy = wp.empty(n, dtype=backup.dtype, device=backup.device)
-            wp.copy(copy, backup, src_offset=world * n, count=n)
-            copies.append(copy)
-        return copies
+        return world_shares(self._backups, world, worlds)
 
     def put_world(self, copies: list, world: int, worlds: int) -> None:
         """Write `world_backup` copies back into world `world`'s share of the protected arrays."""
