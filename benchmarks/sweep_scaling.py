@@ -9,7 +9,7 @@ Runs the same sweep (default `--sweep locomotion`: the sphere walker at level 3 
 AI × thickness, 16 points as 4 batched runs; `--quick`: cube-waves, 4 quick points) with the
 embedded Dask cluster on the first N GPUs (CUDA_VISIBLE_DEVICES) or N CPU workers, for every N
 of `--workers`, each in a fresh process and folder, after one warm-up sweep that fills the kernel
-cache. Writes sweep_scaling_DEVICE[_deterministic].json: per N the wall time, the aggregate mechanics (or wave)
+cache (`--no-warm-up`: the cache is warm from an earlier sweep; no warm-up and no run-to-run baseline). Writes sweep_scaling_DEVICE[_deterministic].json: per N the wall time, the aggregate mechanics (or wave)
 steps per second, the parallel efficiency against the smallest N, the points' own wall times
 (summed, and the longest: what the workers could not share), and how many table values
 differ from the smallest N's (0 expected with --deterministic; on a GPU float atomics otherwise
@@ -112,6 +112,9 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true", help="the same as --sweep quick")
     parser.add_argument("--deterministic", action="store_true",
                         help="bit-exact runs (wavewarp.device.set_deterministic) in every sweep")
+    parser.add_argument("--no-warm-up", action="store_true",
+                        help="the kernel cache is warm already (an earlier sweep on this machine, same WARP_CACHE_PATH): "
+                        "skip the warm-up sweep and its run-to-run baseline")  # fmt: skip
     parser.add_argument("--kept-cluster", action="store_true",
                         help="also time each sweep sent to a `wavewarp cluster` kept running (its second sweep)")
     parser.add_argument("--out", default="benchmarks/results")
@@ -126,13 +129,14 @@ def main(argv=None) -> int:
     rows, reference = [], None
     with tempfile.TemporaryDirectory(prefix="wavewarp-sweep-scaling-") as scratch:
         result = {"benchmark": "sweep_scaling", **describe_device(device), "date": date.today().isoformat(),
-                  "sweep": arguments, "warm_up_s": run_sweep(arguments, os.path.join(scratch, "warm-up"), counts[0],
-                                                             args.device), "rows": rows}  # fmt: skip
+                  "sweep": arguments, "rows": rows}  # fmt: skip
+        if not args.no_warm_up:
+            result["warm_up_s"] = run_sweep(arguments, os.path.join(scratch, "warm-up"), counts[0], args.device)
         for n in counts:
             wall = run_sweep(arguments, os.path.join(scratch, f"workers-{n}"), n, args.device)
             results = table(os.path.join(scratch, f"workers-{n}"))
             reference = reference or results
-            if n == counts[0]:  # the warm-up ran the same sweep on as many workers: the run-to-run baseline
+            if n == counts[0] and not args.no_warm_up:  # the warm-up ran the same sweep on as many workers: the run-to-run baseline
                 result["warm_up_differing_values"] = differing(table(os.path.join(scratch, "warm-up")), reference)
                 print(f"the warm-up sweep on {n} workers (the same sweep, run again) differs from it in "
                       f"{result['warm_up_differing_values']} values")  # fmt: skip

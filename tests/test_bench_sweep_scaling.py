@@ -21,3 +21,12 @@ def test_bench_sweep_scaling_quick_writes_a_row_per_worker_count(tmp_path):
         assert row["efficiency"] == pytest.approx(rows[0]["wall_s"] / (row["wall_s"] * row["workers"]), rel=1e-12)
         assert row["kept_cluster_wall_s"] > 0
     assert (tmp_path / "sweep_scaling_cpu.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_bench_sweep_scaling_without_warm_up_has_no_baseline(tmp_path):
+    assert cli(["bench", "sweep_scaling", "--quick", "--device", "cpu", "--workers", "1", "--no-warm-up", "--out",
+                str(tmp_path)]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "sweep_scaling_cpu.json").read_text())
+    assert "warm_up_s" not in result and "warm_up_differing_values" not in result
+    assert [r["workers"] for r in result["rows"]] == [1] and result["rows"][0]["points"] == 4
