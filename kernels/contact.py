@@ -7,6 +7,10 @@ reach the control points through Lᵀ, which does the same virtual work (f·u = 
 The per-area contact (`Ground(contact="area")`, ours: it converges under refinement) evaluates the
 same laws as pressures at the quadrature points of the limit surface, p_q = Σ N_I(q) x_I and
 u_q = Σ N_I(q) v_I, and spreads f_q dω̄⁰_q back with the same basis (virtual work again).
+
+The implicit solve (`Ground(solve="implicit")`) finds each point's contact and friction force f
+consistent with its own end-of-step velocity u⁺ = u* + r f (u* without contact; r the point's
+response: the row sum of L M⁻¹ Lᵀ over the points in contact, times dt, or 1/ζ overdamped).
 """
 
 from typing import Any
@@ -15,15 +19,6 @@ import warp as wp
 
 from . import declare_overloads, scalar_of
 from .limit_surface import basis_row, limit_motion_kernel, patch_scalar
-
-
-@wp.kernel
-def gravity_kernel(mass: wp.array(dtype=Any), g: Any, forces: wp.array(dtype=Any)):
-    """forces_I += -M_I g ẑ (docs/theory/dynamics.md)."""
-    i = wp.tid()
-    f = forces[i]
-    f[2] = f[2] - mass[i] * g
-    forces[i] = f
 
 
 @wp.kernel
@@ -105,7 +100,146 @@ def quadrature_spread_kernel(
         wp.atomic_add(forces, patch_vertices[start + k], basis[row, k][0] * f)
 
 
-declare_overloads(gravity_kernel, mass="scalar[]", g="scalar", forces="vec3[]")
+@wp.kernel
+def contact_indicator_kernel(p: wp.array(dtype=Any), active: wp.array(dtype=Any)):
+    """active_i = (1, 0, 0) where point i is at or below the ground (z ≤ 0), else 0: the unit load on the contact set."""
+    i = wp.tid()
+    z = p[i][2]
+    zero = type(z)(0.0)
+    active[i] = type(p[i])()
+    if z <= zero:
+        active[i] = type(p[i])(type(z)(1.0), zero, zero)
+
+
+@wp.kernel
+def limit_response_kernel(
+    load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), ring_start: wp.array(dtype=wp.int32),
+    ring: wp.array(dtype=wp.int32), centre_weight: wp.array(dtype=Any), ring_weight: wp.array(dtype=Any),
+    response: wp.array(dtype=Any),
+):  # fmt: skip
+    """response_i = Σ_J L_iJ load_J,x / M_J with load = Lᵀ(unit load on the contact set): the row sums of L M⁻¹ Lᵀ."""
+    i = wp.tid()
+    s = centre_weight[i] * load[i][0] * inverse_mass[i]
+    for k in range(ring_start[i], ring_start[i + 1]):
+        j = ring[k]
+        s += ring_weight[i] * load[j][0] * inverse_mass[j]
+    response[i] = s
+
+
+@wp.kernel
+def quadrature_response_kernel(
+    load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32), triangle_type: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any),
+    points_per_triangle: int, response: wp.array(dtype=Any),
+):  # fmt: skip
+    """response_q = Σ_J N_J(q) load_J,x / M_J, load_J = Σ_{q' in contact} N_J(q') dω̄⁰_q': per unit pressure."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    start = patch_start[t]
+    s = inverse_mass[0] - inverse_mass[0]
+    for k in range(patch_start[t + 1] - start):
+        j = patch_vertices[start + k]
+        s += basis[row, k][0] * load[j][0] * inverse_mass[j]
+    response[q] = s
+
+
+@wp.kernel
+def limit_coupled_velocity_kernel(
+    load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), scale: Any, ring_start: wp.array(dtype=wp.int32),
+    ring: wp.array(dtype=wp.int32), centre_weight: wp.array(dtype=Any), ring_weight: wp.array(dtype=Any),
+    predictor: wp.array(dtype=Any), response: wp.array(dtype=Any), limit_forces: wp.array(dtype=Any),
+    others: wp.array(dtype=Any),
+):  # fmt: skip
+    """others_i = u*_i + scale (L M⁻¹ load)_i - r_i f_i with load = Lᵀ f: point i's end-of-step velocity under every
+    contact force but its own (a Jacobi sweep of the coupled contact problem)."""
+    i = wp.tid()
+    s = centre_weight[i] * inverse_mass[i] * load[i]
+    for k in range(ring_start[i], ring_start[i + 1]):
+        j = ring[k]
+        s += ring_weight[i] * inverse_mass[j] * load[j]
+    others[i] = predictor[i] + scale * (s - response[i] * limit_forces[i])
+
+
+@wp.kernel
+def quadrature_coupled_velocity_kernel(
+    load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), scale: Any, patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32), triangle_type: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any),
+    points_per_triangle: int, predictor: wp.array(dtype=Any), response: wp.array(dtype=Any),
+    limit_forces: wp.array(dtype=Any), others: wp.array(dtype=Any),
+):  # fmt: skip
+    """`limit_coupled_velocity_kernel` on the quadrature points (load = Σ_q N_I(q) f_q dω̄⁰_q, f a pressure)."""
+    q = wp.tid()
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    start = patch_start[t]
+    s = predictor[q] - predictor[q]
+    for k in range(patch_start[t + 1] - start):
+        j = patch_vertices[start + k]
+        s += (basis[row, k][0] * inverse_mass[j]) * load[j]
+    others[q] = predictor[q] + scale * (s - response[q] * limit_forces[q])
+
+
+@wp.func
+def slip_speed(speed: Any, a: Any, k_f: Any):
+    """The end-of-step slip speed s ≥ 0 of s + a tanh(k_f s) = speed (a = r μ F_n): Newton from s = 0,
+    which climbs monotonically to the root of this concave increasing function; k_f = ∞ is Coulomb's
+    law, s = max(speed - a, 0)."""
+    zero = type(speed)(0.0)
+    one = type(speed)(1.0)
+    if wp.isinf(k_f):
+        return wp.max(speed - a, zero)
+    s = zero
+    for _ in range(60):
+        th = wp.tanh(k_f * s)
+        step = (speed - s - a * th) / (one + a * k_f * (one - th * th))
+        s = s + step
+        if step <= type(speed)(1e-7) * speed:
+            break
+    return wp.min(s, speed)
+
+
+@wp.kernel
+def implicit_contact_kernel(
+    p: wp.array(dtype=Any), u: wp.array(dtype=Any), response: wp.array(dtype=Any), scale: Any, dt: Any, k: Any,
+    beta: Any, mu: Any, k_f: Any, normal_force: wp.array(dtype=Any), limit_forces: wp.array(dtype=Any),
+):  # fmt: skip
+    """Point i's force f with its end-of-step velocity u⁺ = u* + r f, r = scale × response_i (docs/theory/dynamics.md):
+    F_n = max(k z² - β' u⁺_z, 0) with β' = β + 2k|z| dt (the penalty linearised at z + dt u⁺_z), i.e.
+    F_n = max((k z² - β' u*_z) / (1 + β' r), 0) where z ≤ 0; friction -μ F_n tanh(k_f s) along u*_t, s = |u⁺_t| the
+    slip speed (`slip_speed`; Coulomb for k_f = ∞: the point sticks while |u*_t| ≤ r μ F_n)."""
+    i = wp.tid()
+    z = p[i][2]
+    zero = type(z)(0.0)
+    r = scale * response[i]
+    damping = beta - type(z)(2.0) * k * z * dt
+    fn = (k * z * z - damping * u[i][2]) / (type(z)(1.0) + damping * r)
+    if z > zero or fn < zero:  # above ground, or pulling down: no contact force
+        fn = zero
+    normal_force[i] = fn
+    f = type(p[i])(zero, zero, fn)
+    v_t = type(u[i])(u[i][0], u[i][1], zero)
+    speed = wp.length(v_t)
+    if speed > zero and fn > zero:
+        cap = mu * fn
+        s = slip_speed(speed, r * cap, k_f)
+        magnitude = cap * wp.tanh(k_f * s)
+        if wp.isinf(k_f):
+            magnitude = wp.min(cap, speed / r)
+        f = f - (magnitude / speed) * v_t
+    limit_forces[i] = f
+
+
+@wp.kernel
+def contact_velocity_kernel(
+    contact: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), scale: Any, dt: Any, x: wp.array(dtype=Any),
+    v: wp.array(dtype=Any),
+):  # fmt: skip
+    """v_I += scale (Lᵀ f)_I / M_I (scale dt, or 1/ζ overdamped), then x_I += dt v_I."""
+    i = wp.tid()
+    vi = v[i] + (scale * inverse_mass[i]) * contact[i]
+    v[i] = vi
+    x[i] = x[i] + dt * vi
+
+
 declare_overloads(ground_contact_kernel, p="vec3[]", u="vec3[]", k="scalar", beta="scalar", normal_force="scalar[]",
                   limit_forces="vec3[]")  # fmt: skip
 declare_overloads(friction_kernel, u="vec3[]", normal_force="scalar[]", mu="scalar", k_f="scalar", limit_forces="vec3[]")
@@ -113,14 +247,45 @@ declare_overloads(limit_transpose_kernel, limit_forces="vec3[]", centre_weight="
                   forces="vec3[]")  # fmt: skip
 declare_overloads(quadrature_motion_kernel, x="vec3[]", v="vec3[]", basis="vec6[,]", p="vec3[]", u="vec3[]")
 declare_overloads(quadrature_spread_kernel, pressure="vec3[]", area="scalar[]", basis="vec6[,]", forces="vec3[]")
+declare_overloads(contact_indicator_kernel, p="vec3[]", active="vec3[]")
+declare_overloads(limit_response_kernel, load="vec3[]", inverse_mass="scalar[]", centre_weight="scalar[]",
+                  ring_weight="scalar[]", response="scalar[]")  # fmt: skip
+declare_overloads(quadrature_response_kernel, load="vec3[]", inverse_mass="scalar[]", basis="vec6[,]", response="scalar[]")
+declare_overloads(limit_coupled_velocity_kernel, load="vec3[]", inverse_mass="scalar[]", scale="scalar",
+                  centre_weight="scalar[]", ring_weight="scalar[]", predictor="vec3[]", response="scalar[]",
+                  limit_forces="vec3[]", others="vec3[]")  # fmt: skip
+declare_overloads(quadrature_coupled_velocity_kernel, load="vec3[]", inverse_mass="scalar[]", scale="scalar",
+                  basis="vec6[,]", predictor="vec3[]", response="scalar[]", limit_forces="vec3[]", others="vec3[]")  # fmt: skip
+declare_overloads(implicit_contact_kernel, p="vec3[]", u="vec3[]", response="scalar[]", scale="scalar", dt="scalar",
+                  k="scalar", beta="scalar", mu="scalar", k_f="scalar", normal_force="scalar[]", limit_forces="vec3[]")  # fmt: skip
+declare_overloads(contact_velocity_kernel, contact="vec3[]", inverse_mass="scalar[]", scale="scalar", dt="scalar",
+                  x="vec3[]", v="vec3[]")  # fmt: skip
 
 
 # ---------------------------------------------------------------- launchers
 
 
-def eval_gravity(mass: wp.array, g: float, forces: wp.array) -> None:
-    """forces_I += -M_I g ẑ."""
-    wp.launch(gravity_kernel, dim=len(mass), inputs=[mass, scalar_of(mass)(g)], outputs=[forces], device=mass.device)
+def ground_motion(ground, x: wp.array, v: wp.array, mask, patch: list, points: wp.array, velocities: wp.array) -> None:
+    """The ground's points and their velocities: limit points p = L x, u = L v (`mask`, "point"), or the
+    quadrature points of the limit surface (`patch` tables, "area")."""
+    if ground.contact == "point":
+        ring = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight]
+        wp.launch(limit_motion_kernel, dim=len(points), inputs=[x, v, *ring], outputs=[points, velocities],
+                  device=x.device)  # fmt: skip
+    else:
+        wp.launch(quadrature_motion_kernel, dim=len(points), inputs=[x, v, *patch], outputs=[points, velocities],
+                  device=x.device)  # fmt: skip
+
+
+def spread_to_control_points(ground, point_forces: wp.array, mask, patch: list, rest_area, forces: wp.array) -> None:
+    """forces += Lᵀ f (point contact), or Σ_q N_I(q) f_q dω̄⁰_q (area contact: f a pressure)."""
+    n = len(point_forces)
+    if ground.contact == "point":
+        ring = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight]
+        wp.launch(limit_transpose_kernel, dim=n, inputs=[point_forces, *ring], outputs=[forces], device=forces.device)
+    else:
+        wp.launch(quadrature_spread_kernel, dim=n, inputs=[point_forces, rest_area, *patch], outputs=[forces],
+                  device=forces.device)  # fmt: skip
 
 
 def eval_ground(ground, x: wp.array, v: wp.array, mask, patch: list, rest_area, points: wp.array, velocities: wp.array,
@@ -130,17 +295,43 @@ def eval_ground(ground, x: wp.array, v: wp.array, mask, patch: list, rest_area, 
     points (`patch` tables, `rest_area` dω̄⁰; "area"). `points`, `velocities`, `normal_force` and
     `point_forces` are scratch over the ground's points."""
     n, s, device = len(points), scalar_of(normal_force), x.device
-    ring = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight]
-    if ground.contact == "point":
-        wp.launch(limit_motion_kernel, dim=n, inputs=[x, v, *ring], outputs=[points, velocities], device=device)
-    else:
-        wp.launch(quadrature_motion_kernel, dim=n, inputs=[x, v, *patch], outputs=[points, velocities], device=device)
+    ground_motion(ground, x, v, mask, patch, points, velocities)
     wp.launch(ground_contact_kernel, dim=n, inputs=[points, velocities, s(ground.stiffness), s(ground.damping)],
               outputs=[normal_force, point_forces], device=device)  # fmt: skip
     if ground.friction > 0:
         wp.launch(friction_kernel, dim=n, inputs=[velocities, normal_force, s(ground.friction), s(ground.sharpness)],
                   outputs=[point_forces], device=device)  # fmt: skip
-    if ground.contact == "point":
-        wp.launch(limit_transpose_kernel, dim=n, inputs=[point_forces, *ring], outputs=[forces], device=device)
-    else:
-        wp.launch(quadrature_spread_kernel, dim=n, inputs=[point_forces, rest_area, *patch], outputs=[forces], device=device)
+    spread_to_control_points(ground, point_forces, mask, patch, rest_area, forces)
+
+
+def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.array, scale: float, dt: float, mask,
+                         patch: list, rest_area, points: wp.array, velocities: wp.array, response: wp.array,
+                         others: wp.array, normal_force: wp.array, point_forces: wp.array, load: wp.array) -> None:  # fmt: skip
+    """The implicit contact step: v holds the velocities without contact (u* = L v on the ground's
+    points); each point's force is solved against its own response (`implicit_contact_kernel`), then
+    refined by `ground.sweeps` Jacobi sweeps in which each point sees the others' forces, then
+    v += scale M⁻¹ Lᵀ f and x += dt v. `response`, `others` and `load` are scratch."""
+    n, s, device = len(points), scalar_of(normal_force), x.device
+    point = ground.contact == "point"
+    tables = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight] if point else list(patch)
+    ground_motion(ground, x, v, mask, patch, points, velocities)
+    wp.launch(contact_indicator_kernel, dim=n, inputs=[points], outputs=[point_forces], device=device)
+    load.zero_()
+    spread_to_control_points(ground, point_forces, mask, patch, rest_area, load)
+    wp.launch(limit_response_kernel if point else quadrature_response_kernel, dim=n, inputs=[load, inverse_mass, *tables],
+              outputs=[response], device=device)  # fmt: skip
+    laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
+    wp.launch(implicit_contact_kernel, dim=n, inputs=[points, velocities, response, *laws],
+              outputs=[normal_force, point_forces], device=device)  # fmt: skip
+    coupled = limit_coupled_velocity_kernel if point else quadrature_coupled_velocity_kernel
+    for _ in range(ground.sweeps):
+        load.zero_()
+        spread_to_control_points(ground, point_forces, mask, patch, rest_area, load)
+        wp.launch(coupled, dim=n, inputs=[load, inverse_mass, s(scale), *tables, velocities, response, point_forces],
+                  outputs=[others], device=device)  # fmt: skip
+        wp.launch(implicit_contact_kernel, dim=n, inputs=[points, others, response, *laws],
+                  outputs=[normal_force, point_forces], device=device)  # fmt: skip
+    load.zero_()
+    spread_to_control_points(ground, point_forces, mask, patch, rest_area, load)
+    wp.launch(contact_velocity_kernel, dim=len(x), inputs=[load, inverse_mass, s(scale), s(dt)], outputs=[x, v],
+              device=device)  # fmt: skip

@@ -75,12 +75,10 @@ def rigid_correction_kernel(
 
 @wp.func
 def specific_force(force: Any, inverse_mass: Any, rigid: wp.array(dtype=Any), k: int, r: Any, gravity: Any):
-    """F/M - g ẑ - a_rigid at a point r = x - c from its world's centre (rigid rows k..k+4): a_rigid =
-    N/ΣM + α × r undoes the net force and torque of the internal forces' round-off (zero in exact
-    arithmetic; in float32 they would set a resting shell rolling)."""
-    accel = inverse_mass * force - rigid[k] - wp.cross(rigid[k + 1], r)
-    accel[2] = accel[2] - gravity
-    return accel
+    """F/M + g - a_rigid at a point r = x - c from its world's centre (rigid rows k..k+4; g the gravity
+    vector): a_rigid = N/ΣM + α × r undoes the net force and torque of the internal forces' round-off
+    (zero in exact arithmetic; in float32 they would set a resting shell rolling)."""
+    return inverse_mass * force - rigid[k] - wp.cross(rigid[k + 1], r) + gravity
 
 
 @wp.kernel
@@ -92,10 +90,12 @@ def symplectic_euler_kernel(
     gravity: Any,
     dt: Any,
     worlds: int,
+    move: int,
     x: wp.array(dtype=Any),
     v: wp.array(dtype=Any),
 ):
-    """v += dt (F/M - g ẑ - a_rigid - η (v - v_rigid)), then x += dt v (the rigid rows of the vertex's world).
+    """v += dt (F/M + g - a_rigid - η (v - v_rigid)), then (if `move`) x += dt v (the rigid rows of the vertex's
+    world; without `move` v is the predictor the implicit contact starts from).
 
     Gravity M_I g on every control point is the uniform acceleration g (`specific_force`); the damping
     acts on the velocity relative to the rigid-body motion v_rigid = v̄ + Ω × (x - c), so it exerts
@@ -107,7 +107,8 @@ def symplectic_euler_kernel(
     accel = specific_force(forces[i], inverse_mass[i], rigid, k, r, gravity)
     vi = v[i] + dt * (accel - damping * (v[i] - rigid[k + 3] - wp.cross(rigid[k + 4], r)))
     v[i] = vi
-    x[i] = x[i] + dt * vi
+    if move != 0:
+        x[i] = x[i] + dt * vi
 
 
 @wp.kernel
@@ -119,16 +120,18 @@ def overdamped_euler_kernel(
     gravity: Any,
     dt: Any,
     worlds: int,
+    move: int,
     x: wp.array(dtype=Any),
     v: wp.array(dtype=Any),
 ):
-    """Mobility model: v = (F/M - g ẑ - a_rigid) / ζ (`specific_force`), then x += dt v (v is what the
+    """Mobility model: v = (F/M + g - a_rigid) / ζ (`specific_force`), then (if `move`) x += dt v (v is what the
     ground sees next step); ζ is the drag per unit mass against the lab frame."""
     i = wp.tid()
     k = 5 * (i // (x.shape[0] // worlds))
     vi = inverse_drag * specific_force(forces[i], inverse_mass[i], rigid, k, x[i] - rigid[k + 2], gravity)
     v[i] = vi
-    x[i] = x[i] + dt * vi
+    if move != 0:
+        x[i] = x[i] + dt * vi
 
 
 @wp.kernel
@@ -184,9 +187,9 @@ declare_overloads(rigid_sums_kernel, forces="vec3[]", mass="scalar[]", x="vec3[]
 declare_overloads(rigid_correction_kernel, sums="vec3[]", second_moment="mat33[]", inverse_total_mass="scalar[]",
                   correction="vec3[]")  # fmt: skip
 declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]", damping="scalar",
-                  gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+                  gravity="vec3", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(overdamped_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]",
-                  inverse_drag="scalar", gravity="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+                  inverse_drag="scalar", gravity="vec3", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(reference_ramp_kernel, start="scalar[]", end="scalar[]", fraction="scalar", out="scalar[]")
 declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3[]")
 declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar[]",
@@ -210,20 +213,22 @@ def eval_rigid_correction(forces: wp.array, mass: wp.array, x: wp.array, v: wp.a
               device=device)  # fmt: skip
 
 
-def integrate_symplectic_euler(forces, inverse_mass, rigid, damping: float, gravity: float, dt: float, worlds: int, x,
-                               v) -> None:  # fmt: skip
-    """v += dt (F/M - rigid - g ẑ - η (v - v_rigid)), then x += dt v."""
+def integrate_symplectic_euler(forces, inverse_mass, rigid, damping: float, gravity, dt: float, worlds: int, x, v,
+                               move: bool = True) -> None:  # fmt: skip
+    """v += dt (F/M + g - rigid - η (v - v_rigid)) (g the gravity vector), then (`move`) x += dt v."""
     s = scalar_of(inverse_mass)
-    wp.launch(symplectic_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(damping), s(gravity), s(dt),
-                                                           worlds], outputs=[x, v], device=x.device)  # fmt: skip
+    g = wp.types.vector(3, s)(*gravity)
+    wp.launch(symplectic_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(damping), g, s(dt), worlds,
+                                                           int(move)], outputs=[x, v], device=x.device)  # fmt: skip
 
 
-def integrate_overdamped_euler(forces, inverse_mass, rigid, inverse_drag: float, gravity: float, dt: float, worlds: int,
-                               x, v) -> None:  # fmt: skip
-    """v = (F/M - rigid - g ẑ) / ζ, x += dt v."""
+def integrate_overdamped_euler(forces, inverse_mass, rigid, inverse_drag: float, gravity, dt: float, worlds: int, x, v,
+                               move: bool = True) -> None:  # fmt: skip
+    """v = (F/M + g - rigid) / ζ (g the gravity vector), then (`move`) x += dt v."""
     s = scalar_of(inverse_mass)
-    wp.launch(overdamped_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(inverse_drag), s(gravity),
-                                                           s(dt), worlds], outputs=[x, v], device=x.device)  # fmt: skip
+    g = wp.types.vector(3, s)(*gravity)
+    wp.launch(overdamped_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(inverse_drag), g, s(dt),
+                                                           worlds, int(move)], outputs=[x, v], device=x.device)  # fmt: skip
 
 
 def eval_reference_ramp(start: wp.array, end: wp.array, fraction: float, out: wp.array) -> None:

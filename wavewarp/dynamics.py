@@ -15,7 +15,9 @@ Stability (guarded like the chemistry steppers): dt < 2/ω (√(1 + ζ²) - ζ),
 eigenvalue of M⁻¹H (H the Hessian of the shell energy, by Lanczos on central force
 differences) and ζ = (η + η_ground) / 2ω, η_ground = β max_J (Lᵀ1)_J / M_J the contact damping
 per unit mass. The contact stiffness 2k|z| is small against the shell's at the scenes'
-penetrations; a runaway it causes is caught by the blow-up check.
+penetrations; a runaway it causes is caught by the blow-up check. An implicit ground
+(`Ground(solve="implicit")`) solves each point's damping, linearised stiffness and friction with its
+own end-of-step velocity: ζ = η / 2ω, whatever β and k_f.
 
 `OverdampedSolver` is the mobility model (ζ M v = F, no inertia) on the same terms.
 
@@ -40,7 +42,7 @@ from .kernels import dynamics as kernels_dynamics
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import reduce as kernels_reduce
 from .kernels import shell as kernels_shell
-from .kernels.contact import eval_gravity, eval_ground
+from .kernels.contact import eval_ground, eval_implicit_ground
 from .kernels.dynamics import (
     eval_rigid_correction,
     eval_speed_runaway,
@@ -62,6 +64,12 @@ class Ground:
     contact "point" (the paper's): the law acts on each control vertex's limit point, k and β per point.
     contact "area" (ours): the law is a pressure at the quadrature points of the limit surface,
     k and β per unit rest area, so the load pattern converges under refinement (docs/theory/dynamics.md).
+    solve "explicit" (the paper's): the forces at the step's start (the overdamped model sees the last
+    step's velocity). "implicit": per point, the damping, the penalty's stiffness (linearised) and the
+    friction are solved against the point's own end-of-step velocity: stable at any drag and any k_f,
+    and k_f = inf is Coulomb's law (stick while the tangential load is below μ F_n); `sweeps` Jacobi
+    sweeps then let each point see the others' forces (0: each point alone).
+    slope θ (radians): the ground is inclined, gravity g (sin θ, 0, -cos θ) in its frame (downhill +x).
     """
 
     stiffness: float = 10.0  # k
@@ -69,14 +77,25 @@ class Ground:
     friction: float = 0.1  # μ
     sharpness: float = 0.1  # k_f
     contact: str = "point"
+    solve: str = "explicit"
+    sweeps: int = 8
+    slope: float = 0.0
 
     def __post_init__(self):
         for name in ("stiffness", "damping", "friction", "sharpness"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"Ground.{name} must be a finite number >= 0, got {value!r}")
+            coulomb = name == "sharpness" and value == math.inf and self.solve == "implicit"
+            if not ((math.isfinite(value) or coulomb) and value >= 0):
+                raise ValueError(f"Ground.{name} must be a finite number >= 0, got {value!r}"
+                                 + (" (sharpness inf, Coulomb's law, needs solve='implicit')" if value == math.inf else ""))  # fmt: skip
         if self.contact not in ("point", "area"):
             raise ValueError(f"Ground.contact must be 'point' or 'area', got {self.contact!r}")
+        if self.solve not in ("explicit", "implicit"):
+            raise ValueError(f"Ground.solve must be 'explicit' or 'implicit', got {self.solve!r}")
+        if isinstance(self.sweeps, bool) or not isinstance(self.sweeps, int) or self.sweeps < 0:
+            raise ValueError(f"Ground.sweeps must be an integer >= 0, got {self.sweeps!r}")
+        if not (math.isfinite(self.slope) and abs(self.slope) < math.pi / 2):
+            raise ValueError(f"Ground.slope must be an angle in radians between -π/2 and π/2, got {self.slope!r}")
 
 
 class InertialSolver:
@@ -104,6 +123,9 @@ class InertialSolver:
         self.damping = finite("damping", damping)
         if self.gravity < 0 or self.damping < 0:
             raise ValueError(f"gravity and damping must be >= 0, got gravity={plain(gravity)!r}, damping={plain(damping)!r}")
+        slope = 0.0 if ground is None else ground.slope
+        self.gravity_vector = (self.gravity * math.sin(slope), 0.0, -self.gravity * math.cos(slope))
+        self.implicit = ground is not None and ground.solve == "implicit"
         mesh = shell.mesh
         n, self.worlds = mesh.n_vertices, mesh.worlds
         self._reduction_threads = reduction_threads(mesh.vertices_per_world, shell.deterministic)  # per world
@@ -127,6 +149,8 @@ class InertialSolver:
             self._limit_v = wp.zeros(points, dtype=self.vec3)
             self._limit_forces = wp.zeros(points, dtype=self.vec3)
             self._normal_force = wp.zeros(points, dtype=self.scalar)
+            self._response = wp.zeros(points if self.implicit else 0, dtype=self.scalar)
+            self._others = wp.zeros(points if self.implicit else 0, dtype=self.vec3)
             # dω̄⁰ at each quadrature point (area contact)
             self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"] if points != n else None
             self.flag = wp.zeros(self.worlds, dtype=wp.int32)  # per world
@@ -154,7 +178,8 @@ class InertialSolver:
         return self.ground.damping * float(np.max(column_sums / self.mass))
 
     def _zeta(self, omega: float) -> float:
-        return (self.damping + self.contact_damping) / (2 * omega)
+        """The damping ratio of the top mode: the background damping, and the contact's when it is explicit."""
+        return (self.damping + (0.0 if self.implicit else self.contact_damping)) / (2 * omega)
 
     def bound(self, omega: float) -> float:
         """The stability bound on dt for the largest frequency ω."""
@@ -200,7 +225,8 @@ class InertialSolver:
                     self._limit_x, self._limit_v, self._normal_force, self._limit_forces, self._forces)  # fmt: skip
 
     def step(self, state_in: State, state_out: State, dt: float) -> None:
-        """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration)."""
+        """F (shell) → rigid-body sums → contact and friction → integrator (gravity is its uniform acceleration);
+        implicit ground: integrator without contact (the predictor) → per-point contact solve → x."""
         if state_out is not state_in:
             wp.copy(state_out.x, state_in.x)
             wp.copy(state_out.v, state_in.v)
@@ -209,12 +235,23 @@ class InertialSolver:
             self.shell.forces_device(x, self._forces)
             eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self.worlds, self._reduction_threads,
                                   self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+            if self.implicit:
+                self._integrate(x, v, dt, move=False)
+                eval_implicit_ground(self.ground, x, v, self._inverse_mass, self._response_scale(dt), dt, self.mask,
+                                     self.shell.tables.patch(), self._rest_area, self._limit_x, self._limit_v,
+                                     self._response, self._others, self._normal_force, self._limit_forces,
+                                     self._forces)  # fmt: skip
+                return
             self.contact_forces(x, v)
             self._integrate(x, v, dt)
 
-    def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
-        integrate_symplectic_euler(self._forces, self._inverse_mass, self._rigid, self.damping, self.gravity, dt,
-                                   self.worlds, x, v)  # fmt: skip
+    def _response_scale(self, dt: float) -> float:
+        """A point's velocity change per unit of M⁻¹ × force over a step: dt (inertia)."""
+        return dt
+
+    def _integrate(self, x: wp.array, v: wp.array, dt: float, move: bool = True) -> None:
+        integrate_symplectic_euler(self._forces, self._inverse_mass, self._rigid, self.damping, self.gravity_vector, dt,
+                                   self.worlds, x, v, move)  # fmt: skip
 
     def launch_checks(self, state: State, limit: float) -> None:
         """flag[w] = 1 where some |v_I| of world w passed `limit` or is NaN/Inf (read by the caller)."""
@@ -229,20 +266,22 @@ class InertialSolver:
                        self._first_moment, row, trace)  # fmt: skip
 
     def external_forces(self, state: State) -> np.ndarray:
-        """(V, 3) gravity, contact and friction forces on the control points at `state`."""
+        """(V, 3) gravity, contact and friction forces on the control points: the laws at `state` (explicit
+        ground), or the contact forces the last step applied (implicit: they depend on that step's predictor)."""
         with wp.ScopedDevice(self.device):
-            self._forces.zero_()
-            if self.gravity > 0:
-                eval_gravity(self._mass, self.gravity, self._forces)
-            self.contact_forces(state.x, state.v)
-        return self._forces.numpy().astype(np.float64)
+            if not self.implicit:
+                self._forces.zero_()
+                self.contact_forces(state.x, state.v)
+            forces = self._forces.numpy().astype(np.float64)
+        return forces + np.outer(self.mass, self.gravity_vector)
 
     def normal_forces(self, state: State) -> np.ndarray:
-        """Ground normal force on each of the ground's points at `state`: (V,) on the limit points, or (Q,)
-        on the quadrature points for the area contact (pressure × dω̄⁰)."""
+        """Ground normal force on each of the ground's points at `state` (implicit: of the last step): (V,) on
+        the limit points, or (Q,) on the quadrature points for the area contact (pressure × dω̄⁰)."""
         if self.ground is None:
             return np.zeros(len(self.mass))
-        self.external_forces(state)
+        if not self.implicit:
+            self.external_forces(state)
         force = self._normal_force.numpy().astype(np.float64)
         return force if self.ground.contact == "point" else force * self._rest_area.numpy()
 
@@ -261,7 +300,9 @@ class OverdampedSolver(InertialSolver):
     Stability: explicit Euler on the gradient flow needs dt < 2ζ/ω² (ω² = λ_max(M⁻¹H)); the lagged
     contact damping feeds back with gain η_ground/ζ, so ζ must exceed η_ground (ValueError otherwise).
     drag=None picks 2 η_ground (gain ½), the least drag that keeps the lag well damped (no ground: give
-    ζ). No background damping: the drag damps every motion.
+    ζ). An implicit ground (`Ground(solve="implicit")`) has no lag: each point's contact and friction
+    are solved with its own velocity, v = v* + M⁻¹ Lᵀ f / ζ, at any drag. No background damping: the
+    drag damps every motion.
     """
 
     scheme = "overdamped (mobility) shell dynamics"
@@ -278,11 +319,12 @@ class OverdampedSolver(InertialSolver):
             if eta == 0:
                 raise ValueError("drag=None picks 2 η_ground, and there is no ground: give the drag ζ (> 0)")
             self.drag = 2.0 * eta
-        elif self.drag <= eta:
+        elif self.drag <= eta and not self.implicit:
             raise ValueError(
                 f"drag ζ = {self.drag:.6g} does not exceed the ground's damping per unit mass η_ground = {eta:.6g}: the "
                 f"lagged contact velocity would oscillate and grow; use drag > {eta:.6g}, e.g. {2 * eta:.6g} "
-                f"(drag=None, in a scene --set drag=0, picks that)"
+                f"(drag=None, in a scene --set drag=0, picks that), or the implicit contact (Ground(solve='implicit'), "
+                f"in a scene --set contact_solve=implicit), which takes any drag"
             )  # fmt: skip
         return eta
 
@@ -292,9 +334,13 @@ class OverdampedSolver(InertialSolver):
     def bound_formula(self, omega: float) -> str:
         return f"dt < 2ζ/ω², ζ = {self.drag:.6g}"
 
-    def _integrate(self, x: wp.array, v: wp.array, dt: float) -> None:
-        integrate_overdamped_euler(self._forces, self._inverse_mass, self._rigid, 1.0 / self.drag, self.gravity, dt,
-                                   self.worlds, x, v)  # fmt: skip
+    def _response_scale(self, dt: float) -> float:
+        """A point's velocity change per unit of M⁻¹ × force: 1/ζ (no inertia)."""
+        return 1.0 / self.drag
+
+    def _integrate(self, x: wp.array, v: wp.array, dt: float, move: bool = True) -> None:
+        integrate_overdamped_euler(self._forces, self._inverse_mass, self._rigid, 1.0 / self.drag, self.gravity_vector,
+                                   dt, self.worlds, x, v, move)  # fmt: skip
 
 
 class ShellDynamics(Stepper):

@@ -29,12 +29,13 @@ class SceneError(ValueError):
 
 
 def param(default, help: str, *, choices=(), positive: bool = False, minimum=None, legacy=None, auto: bool = False,
-          even: bool = False):  # fmt: skip
+          even: bool = False, infinite: bool = False):  # fmt: skip
     """A scene parameter: its default (which fixes its type), one line of help, what values are valid,
     and `legacy`, the value a trajectory written before the parameter existed ran with. `auto`: a number
-    whose 0 means "chosen automatically"; `--set NAME=auto` gives that 0. `even`: an even integer."""
+    whose 0 means "chosen automatically"; `--set NAME=auto` gives that 0. `even`: an even integer.
+    `infinite`: a number that may also be inf."""
     check = {"help": help, "choices": tuple(choices), "positive": positive, "minimum": minimum, "legacy": legacy,
-             "auto": auto, "even": even}  # fmt: skip
+             "auto": auto, "even": even, "infinite": infinite}  # fmt: skip
     return dataclasses.field(default=default, metadata=check)
 
 
@@ -55,12 +56,13 @@ def parse(field: dataclasses.Field, text):
             value = int(text)
         elif kind is float:
             value = float(text)
-            if not math.isfinite(value):
+            if not (math.isfinite(value) or (check.get("infinite") and value == math.inf)):
                 raise ValueError
         else:
             value = str(text)
     except (KeyError, ValueError):
-        expected = {bool: "true or false", int: "an integer", float: "a finite number"}.get(kind, "text")
+        expected = {bool: "true or false", int: "an integer",
+                    float: "a number or inf" if check.get("infinite") else "a finite number"}.get(kind, "text")  # fmt: skip
         expected += " or auto" if check.get("auto") else ""
         raise SceneError(f"bad value for {name}: {text!r} (expected {expected})") from None
     if check["choices"] and value not in check["choices"]:

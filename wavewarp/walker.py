@@ -11,6 +11,7 @@ displacement, and the speed in R per T along the direction of propagation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -26,7 +27,7 @@ from .initial import gaussian_pulse
 from .measurements import locomotion
 from .mesh import Mesh, icosphere
 from .model import ModelBuilder
-from .parameters import as_dict, param
+from .parameters import SceneError, as_dict, param
 from .runs import WaveClock, imperfect, mean_edge, scene_mesh, transport_parameter
 
 AUTO_DT_SAFETY = 0.4  # dt=auto: this fraction of the chemistry's stability bound on the settled shell
@@ -57,7 +58,15 @@ class WalkerParameters:
     contact_area: float = param(0.0, "area contact: the area a per point of k and β; auto (0) = the mean rest area per control "
                                 "vertex", minimum=0.0, auto=True)  # fmt: skip
     friction: float = param(0.1, "friction coefficient μ", minimum=0.0)
-    sharpness: float = param(0.1, "friction regularisation k_f", minimum=0.0)
+    sharpness: float = param(0.1, "friction regularisation k_f; inf: Coulomb's law (contact_solve=implicit)", minimum=0.0,
+                             infinite=True)  # fmt: skip
+    contact_solve: str = param("explicit", "explicit: the contact and friction forces at the step's start (overdamped: "
+                               "with the last step's velocity; needs drag > η_ground); implicit: each point's damping, "
+                               "stiffness and friction solved with its own end-of-step velocity (any drag, any k_f)",
+                               choices=("explicit", "implicit"))  # fmt: skip
+    contact_sweeps: int = param(8, "implicit contact: Jacobi sweeps coupling the points' forces (0: each point alone)",
+                                minimum=0)  # fmt: skip
+    slope: float = param(0.0, "ground inclination in degrees (downhill along +x, the wave's direction)", minimum=-60.0)
     damping: float = param(0.2, "damping η of the vibrations relative to the rigid-body motion (inertial mechanics)",
                            minimum=0.0)  # fmt: skip
     mechanics: str = param("inertial", "inertial: symplectic Euler with lumped mass; overdamped: the mobility model "
@@ -129,8 +138,13 @@ def place_walker(mesh: Mesh, p, origin) -> Placement:
     per = 1.0
     if p.contact == "area":  # the paper's k and β per point, spread over the area a of one
         per = p.contact_area or area / mesh.n_vertices
+    if p.sharpness == math.inf and p.contact_solve != "implicit":
+        raise SceneError("sharpness=inf (Coulomb's law) needs the implicit contact: --set contact_solve=implicit")
+    if p.slope > 60.0:
+        raise SceneError(f"bad value for slope: {p.slope!r} (must be <= 60 degrees)")
     ground = Ground(stiffness=p.stiffness / per, damping=p.contact_damping / per, friction=p.friction,
-                    sharpness=p.sharpness, contact=p.contact)  # fmt: skip
+                    sharpness=p.sharpness, contact=p.contact, solve=p.contact_solve, sweeps=p.contact_sweeps,
+                    slope=math.radians(p.slope))  # fmt: skip
     touching, depth = ground_lift(mesh, weight, ground)
     lift = np.array([0.0, 0.0, touching - depth])
     mirror = np.array([-1.0, 1.0, 1.0]) if p.mirror else np.ones(3)
