@@ -2,4 +2,4 @@
 
 NAMES = ("accuracy", "batch", "buckling_mobility", "buckling_phase_diagram", "buckling_stability", "chemistry", "limit_surface", "locomotion",
          "locomotion_ensemble", "numbering",
-         "quick_identity", "shell", "speed", "stability", "sweep_scaling", "warp_libraries")  # fmt: skip  # modules with main(argv); numpy_shell is a baseline
+         "quick_identity", "shell", "speed", "stability", "sweep_scaling", "walker_regimes", "warp_libraries")  # fmt: skip  # modules with main(argv); numpy_shell is a baseline

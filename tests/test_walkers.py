@@ -361,3 +361,21 @@ def test_first_arrival_is_the_first_step_each_vertex_reaches_half():
         first[(first < 0) & (c >= 0.5)] = (n - 0.5) * wave.dt
     assert (first == 0).any() and (first > 0).sum() > 10 and (first < 0).any()  # started, spread, not everywhere
     np.testing.assert_array_equal(arrival.times(wave.dt), first)
+
+
+@pytest.mark.slow
+def test_overdamped_walker_on_the_implicit_coulomb_ground_runs_below_the_explicit_drag_limit():
+    """contact_solve=implicit: the prism walker runs on Coulomb's ground (sharpness inf) at a drag below the
+    ground's damping per unit mass, which the explicit contact refuses; it stays on the ground, its load
+    near its weight (it is still settling: the load falls to the weight over ~2 time units)."""
+    run = walk("prism-walker", mechanics="overdamped", contact_solve="implicit", sharpness="inf", drag=0.4, settle=0.5,
+               periods=0.01, frames=1)  # fmt: skip
+    dynamics = run.dynamics
+    assert dynamics.drag == 0.4 < dynamics.contact_damping and dynamics.solver.implicit
+    assert np.isfinite(dynamics.positions()).all()
+    weight = dynamics.total_mass * run.p.gravity
+    assert weight < dynamics.normal_forces().sum() < 2 * weight
+    with pytest.raises(ValueError, match="contact_solve=implicit"):
+        walk("prism-walker", mechanics="overdamped", drag=0.4, settle=0.0, periods=0.01, frames=1)
+    with pytest.raises(ValueError, match="needs the implicit contact"):
+        walk("prism-walker", sharpness="inf", settle=0.0, periods=0.01, frames=1)

@@ -1,0 +1,187 @@
+"""Walkers across mechanical regimes (Fig. 3a; docs/studies/2026-11-26-walker-regimes.md): the sphere and
+prism twins over seeds in each regime, against the paper's three claims.
+
+    wavewarp bench walker_regimes --device cuda --seeds 8 --periods 4 --out benchmarks/results/regimes
+    wavewarp bench walker_regimes --tables benchmarks/results/regimes --device-name "NVIDIA H200"
+
+A regime is a mechanics, a contact solve and a friction law (`REGIMES`; `--regimes` picks some).
+Each regime × scene is one `wavewarp sweep` (sensitive × seeds, the seeds of one twin one batched
+run) whose table is kept as OUT/REGIME_SCENE.csv; `--tables DIR` reads such tables instead. Writes
+OUT/walker_regimes.json — per regime, scene and twin: n, mean and standard deviation of
+speed_R_per_T (the forward displacement per pulse, in R), the share of seeds moving along the wave
+and the mean period; per regime and scene the twins' speed ratio (sensitive / insensitive, its
+spread from the two standard errors) and period ratio; and the paper's three claims checked — every
+twin moves along the wave, the sensitive sphere is faster (by more than two standard errors), the
+sensitive prism is more than twice as fast as its twin — and OUT/walker_regimes.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import glob
+import math
+import os
+import shutil
+import sys
+import tempfile
+from datetime import date
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from wavewarp.device import describe_device, resolve_device  # noqa: E402
+from wavewarp.io import write_png, write_result  # noqa: E402
+from wavewarp.sweep import SweepSpec, sweep  # noqa: E402
+
+SCENES = ("sphere-walker", "prism-walker")
+REGIMES = {
+    "inertial-explicit-kf0.1": [],  # the scenes' defaults: friction a weak viscous drag
+    "inertial-implicit-coulomb": ["contact_solve=implicit", "sharpness=inf"],
+    "overdamped-implicit-kf1000": ["mechanics=overdamped", "contact_solve=implicit", "sharpness=1000"],
+    "overdamped-implicit-coulomb": ["mechanics=overdamped", "contact_solve=implicit", "sharpness=inf"],
+}  # fmt: skip
+
+
+def run_regime(regime: str, scene: str, args, device) -> str:
+    """The sweep of `scene`'s twins over the seeds in `regime`; the path of its kept table."""
+    fixed = (f"noise={args.noise}", f"periods={args.periods}", *REGIMES[regime], *args.set)
+    out = tempfile.mkdtemp(prefix=f"wavewarp-regimes-{scene}-")
+    try:
+        spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
+                         device="cuda" if device.is_cuda else "cpu")  # fmt: skip
+        sweep(spec, out, batch=args.seeds, progress=True)
+        table = os.path.join(args.out, f"{regime}_{scene}.csv")
+        shutil.copy(os.path.join(out, "table.csv"), table)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return table
+
+
+def twin(rows: list, sensitive: bool) -> dict:
+    """n, speeds, mean, sd, share moving forward and mean period of one twin's seeds."""
+    chosen = [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
+    speeds = [float(r["speed_R_per_T"]) for r in chosen]
+    n = len(speeds)
+    return {"n": n, "speeds": speeds, "mean": float(np.mean(speeds)) if n else None,
+            "sd": float(np.std(speeds, ddof=1)) if n > 1 else 0.0,
+            "forward_share": sum(s > 0 for s in speeds) / n if n else None,
+            "period": float(np.mean([float(r["period"]) for r in chosen])) if n else None}  # fmt: skip
+
+
+def twins(rows: list) -> dict:
+    """Both twins, and the speed ratio sensitive / insensitive with its first-order spread."""
+    s, i = twin(rows, True), twin(rows, False)
+    cell = {"sensitive": s, "insensitive": i, "speed_ratio": None, "speed_ratio_spread": None, "period_ratio": None}
+    if s["n"] and i["n"] and s["mean"] != 0 and i["mean"] != 0:
+        ratio = s["mean"] / i["mean"]
+        relative = math.hypot(s["sd"] / math.sqrt(s["n"]) / s["mean"], i["sd"] / math.sqrt(i["n"]) / i["mean"])
+        cell.update(speed_ratio=ratio, speed_ratio_spread=abs(ratio) * relative, period_ratio=s["period"] / i["period"])
+    return cell
+
+
+def claims(scenes: dict) -> dict:
+    """The paper's claims for one regime (None where a scene is missing)."""
+    def separated(cell):
+        s, i = cell["sensitive"], cell["insensitive"]
+        error = math.hypot(s["sd"] / math.sqrt(s["n"]), i["sd"] / math.sqrt(i["n"]))
+        return s["mean"] - i["mean"] > 2 * error
+
+    complete = [c for c in scenes.values() if c["sensitive"]["n"] and c["insensitive"]["n"]]
+    sphere, prism = scenes.get("sphere-walker"), scenes.get("prism-walker")
+    return {"forward": all(c[t]["mean"] > 0 for c in complete for t in ("sensitive", "insensitive")) if complete else None,
+            "sensitive_sphere_faster": separated(sphere) if sphere and sphere["sensitive"]["n"] else None,
+            "prism_ratio_above_2": (prism["sensitive"]["mean"] > 0 and prism["speed_ratio"] is not None
+                                    and prism["speed_ratio"] > 2) if prism and prism["sensitive"]["n"] else None}  # fmt: skip
+
+
+def summary(tables: dict) -> dict:
+    """{regime: {"scenes": {scene: twins}, "claims": ...}} from {(regime, scene): rows}."""
+    regimes = {}
+    for (regime, scene), rows in tables.items():
+        regimes.setdefault(regime, {"scenes": {}})["scenes"][scene] = twins(rows)
+    for regime in regimes.values():
+        regime["claims"] = claims(regime["scenes"])
+    return regimes
+
+
+def read_tables(folder: str, regimes, scenes) -> dict:
+    """{(regime, scene): rows} of the tables REGIME_SCENE.csv in `folder` (those of the regimes and scenes asked for)."""
+    tables = {}
+    for path in sorted(glob.glob(os.path.join(folder, "*_*.csv"))):
+        regime, scene = os.path.basename(path)[:-4].rsplit("_", 1)
+        if regime in regimes and scene in scenes:
+            with open(path) as f:
+                tables[(regime, scene)] = list(csv.DictReader(f))
+    return tables
+
+
+def chart(result: dict, path: str) -> None:
+    scenes = [s for s in SCENES if any(s in r["scenes"] for r in result["regimes"].values())]
+    regimes = list(result["regimes"])
+    fig, axes = plt.subplots(1, len(scenes), figsize=(6.0 * len(scenes), 4.6), squeeze=False)
+    for ax, scene in zip(axes[0], scenes):
+        for k, (key, label) in enumerate((("sensitive", "sensitive"), ("insensitive", "insensitive twin"))):
+            cells = [(x, result["regimes"][r]["scenes"].get(scene)) for x, r in enumerate(regimes)]
+            cells = [(x + (0.12 if k == 0 else -0.12), c[key]) for x, c in cells if c and c[key]["n"]]
+            ax.errorbar([x for x, _ in cells], [c["mean"] for _, c in cells], yerr=[c["sd"] for _, c in cells], fmt="o",
+                        color=f"C{k}", capsize=3, label=f"{label}, mean ± sd")  # fmt: skip
+            for x, c in cells:
+                ax.plot([x] * c["n"], c["speeds"], ".", color=f"C{k}", alpha=0.35, ms=4)
+        ax.axhline(0.0, color="grey", lw=0.8)
+        ax.set_yscale("symlog", linthresh=1e-4)
+        ax.set_xticks(range(len(regimes)), [r.replace("-", "\n", 1) for r in regimes], fontsize=7)
+        ax.set_ylabel("speed (R per T, forward = along the wave)")
+        ax.set_title(scene)
+        ax.legend(fontsize=7)
+    fig.suptitle(f"walkers across regimes, {result['device_name']}", fontsize=10)
+    fig.tight_layout()
+    write_png(fig, path, dpi=110)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="wavewarp bench walker_regimes", description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default=None)
+    parser.add_argument("--regimes", nargs="+", choices=tuple(REGIMES), default=list(REGIMES))
+    parser.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
+    parser.add_argument("--seeds", type=int, default=8, help="rest shapes per twin (one batched run)")
+    parser.add_argument("--noise", type=float, default=1e-3, help="rest-shape noise / R (seeded)")
+    parser.add_argument("--periods", type=float, default=4.0)
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed for every run")
+    parser.add_argument("--tables", default=None, metavar="DIR", help="summarise the tables REGIME_SCENE.csv in DIR")
+    parser.add_argument("--device-name", default=None, help="with --tables: the GPU or CPU that computed them")
+    parser.add_argument("--out", default=None, help="folder for the tables, JSON and chart (default: --tables, else .)")
+    parser.add_argument("--quick", action="store_true", help="the scenes' quick runs (a CPU smoke run)")
+    args = parser.parse_args(argv)
+    args.out = args.out or args.tables or "."
+    os.makedirs(args.out, exist_ok=True)
+    if args.tables is not None:
+        if not args.device_name:
+            parser.error("--tables needs --device-name (the GPU or CPU that computed them)")
+        described = {"device_name": args.device_name}
+    else:
+        device = resolve_device(args.device)
+        for regime in args.regimes:
+            for scene in args.scenes:
+                run_regime(regime, scene, args, device)
+        described = describe_device(device)
+    tables = read_tables(args.tables or args.out, args.regimes, args.scenes)
+    if not tables:
+        parser.error(f"no tables REGIME_SCENE.csv for {', '.join(args.regimes)} in {args.tables or args.out}")
+    result = dict(benchmark="walker_regimes", date=date.today().isoformat(), **described, regimes=summary(tables))
+    def speed(twin):
+        return "no whole period" if twin["mean"] is None else f"{twin['mean']:+.3g}"
+
+    for regime, cell in result["regimes"].items():
+        print(f"{regime}: " + "; ".join(f"{scene} {speed(c['sensitive'])} / {speed(c['insensitive'])} R/T"
+                                         for scene, c in cell["scenes"].items()) + f"; claims {cell['claims']}")  # fmt: skip
+    write_result(result, args.out, "walker_regimes", chart)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
