@@ -379,3 +379,24 @@ def test_overdamped_walker_on_the_implicit_coulomb_ground_runs_below_the_explici
         walk("prism-walker", mechanics="overdamped", drag=0.4, settle=0.0, periods=0.01, frames=1)
     with pytest.raises(ValueError, match="needs the implicit contact"):
         walk("prism-walker", sharpness="inf", settle=0.0, periods=0.01, frames=1)
+
+
+@pytest.mark.slow
+def test_bench_locomotion_runs_seeds_and_reports_their_ensemble(tmp_path):
+    """--seeds 2 --mechanics overdamped: each twin run with two perturbed rest shapes; the ensemble's mean and
+    sd are those of the runs (recomputed here), the seeds' walks differ, the chart shows the bands."""
+    from wavewarp.cli import main as cli
+
+    assert cli(["bench", "locomotion", "--quick", "--device", "cpu", "--out", str(tmp_path), "--periods", "0.2",
+                "--scenes", "prism-walker", "--seeds", "2", "--noise", "1e-2", "--mechanics", "overdamped"]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "locomotion.json").read_text())
+    runs = result["runs"]
+    assert [(r["sensitive"], r["seed"]) for r in runs] == [(True, 0), (True, 1), (False, 0), (False, 1)]
+    assert all(r["parameters"]["mechanics"] == "overdamped" and r["parameters"]["noise"] == 1e-2 for r in runs)
+    for twin, sensitive in (("sensitive", True), ("insensitive", False)):
+        distances = [r["distance_R"] for r in runs if r["sensitive"] == sensitive]
+        assert distances[0] != distances[1]
+        cell = result["ensembles"]["prism-walker"][twin]["distance_R"]
+        assert cell["n"] == 2 and cell["mean"] == pytest.approx(np.mean(distances), rel=1e-12)
+        assert cell["sd"] == pytest.approx(np.std(distances, ddof=1), rel=1e-12)
+    assert (tmp_path / "locomotion.png").stat().st_size > 10_000

@@ -333,7 +333,8 @@ def imprint_png(run, path, faces, fronts) -> None:
 def locomotion_figure(runs, title: str = "walkers: displacement against time (paper Fig. 3a)"):
     """Forward displacement of the centre of mass in R against t/T, one line per run (name, sensitive,
     trace, forward, radius); sensitive solid, insensitive dashed, as Fig. 3a. Against t where a run's
-    period T is not measured (fewer than two upward crossings of c)."""
+    period T is not measured (fewer than two upward crossings of c). Runs of the same walker and twin
+    (seeds of an ensemble) are drawn as their mean with a ± one standard deviation band."""
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     ax.set_title(title, fontsize=9)
     ax.set_ylabel("displacement / R (direction of propagation)")
@@ -345,11 +346,23 @@ def locomotion_figure(runs, title: str = "walkers: displacement against time (pa
     if not drawn:
         _say(ax, "No run has 2 samples of its trace yet: nothing to plot (run longer: raise --set periods).")
         return fig
+    groups = {}
     for (name, sensitive, trace, forward, radius), period in zip(drawn, periods):
         t, com = trace[:, 0], trace[:, 2:5]
-        measured = f"T = {period:.4g}" if period else "T not measured"
-        ax.plot(t / period if per_period else t, (com - com[0]) @ np.asarray(forward) / radius,
-                "-" if sensitive else "--", label=f"{name} ({'sensitive' if sensitive else 'insensitive'}, {measured})")
+        curve = (t / period if per_period else t, (com - com[0]) @ np.asarray(forward) / radius, period)
+        groups.setdefault((name, sensitive), []).append(curve)
+    for k, ((name, sensitive), curves) in enumerate(groups.items()):
+        style, twin = ("-" if sensitive else "--"), ("sensitive" if sensitive else "insensitive")
+        if len(curves) == 1:
+            x, y, period = curves[0]
+            measured = f"T = {period:.4g}" if period else "T not measured"
+            ax.plot(x, y, style, label=f"{name} ({twin}, {measured})")
+            continue
+        grid = np.linspace(0.0, min(x[-1] for x, _, _ in curves), 200)
+        ys = np.array([np.interp(grid, x, y) for x, y, _ in curves])
+        mean, sd = ys.mean(axis=0), ys.std(axis=0, ddof=1)
+        line = ax.plot(grid, mean, style, label=f"{name} ({twin}, {len(curves)} seeds, mean ± sd)")[0]
+        ax.fill_between(grid, mean - sd, mean + sd, color=line.get_color(), alpha=0.2)
     ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
