@@ -51,6 +51,7 @@ def test_coulomb_block_slides_down_a_steep_slope_at_the_closed_form_acceleration
     assert run.normal_forces().sum() == pytest.approx(run.total_mass * G * math.cos(theta), rel=1e-6)
 
 
+@pytest.mark.slow
 def test_coulomb_block_sticks_on_a_gentle_slope_and_the_sweeps_make_it_exact():
     """tan θ = 0.3 < μ: Coulomb's law holds the block. Solved point by point (no sweeps) it creeps at a speed of
     order dt g sin θ (each point's response is the contact set's row sum, not the whole body's); the Jacobi
