@@ -5,7 +5,8 @@
 Kernels (median time of one evaluation, replayed from a CUDA graph on GPU so that launch
 latency is not counted twice): the Koiter energy + forces with the atomic scatter and with the
 deterministic gather (`Shell(deterministic=True)`), the whole shell force (plus volume term),
-the Laplace–Beltrami action K c, the ground contact (limit points, contact, friction, Lᵀ), and
+the Laplace–Beltrami action K c, the ground contact (limit points, contact, friction, Lᵀ), one
+mechanics step with the explicit and with the implicit ground (`Ground(solve="implicit")`), and
 the vectorised NumPy baseline of the same energy and gradient (float64; `benchmarks/numpy_shell.py`)
 with the ratio. Whole steps: the coupled walker step (one FHN step, the active reference, one
 mechanics step with gravity, contact, friction and damping: `coupled.Walking` with one substep,
@@ -24,6 +25,7 @@ import argparse
 import os
 import sys
 import time
+from dataclasses import replace
 from datetime import date
 
 import numpy as np
@@ -174,6 +176,12 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     solver, state = dynamics.solver, dynamics.state
     rows.append(dict(kernel="ground contact and friction",
                      seconds=seconds_per_call(lambda: solver.contact_forces(state.x, state.v), device, budget)))  # fmt: skip
+    for name, ground in (("mechanics step, explicit ground", walker_ground()),
+                         ("mechanics step, implicit ground (8 sweeps)", replace(walker_ground(), solve="implicit"))):
+        stepper = ShellDynamics(shell, density=WALKER["density"], gravity=WALKER["gravity"], ground=ground,
+                                damping=WALKER["damping"], omega=1.0)  # fmt: skip
+        rows.append(dict(kernel=name, seconds=seconds_per_call(  # a short step: the shell stays at rest on the ground
+            lambda st=stepper: st.solver.step(st.state, st.state, 1e-4), device, budget)))  # fmt: skip
     if numpy_baseline and dtype == "float64":
         baseline = NumpyShell(mesh, thickness=THICKNESS, young=WALKER["young"], poisson=WALKER["poisson"], AC=AC,
                               AI=0.0, volume_penalty=shell.volume_penalty)  # fmt: skip

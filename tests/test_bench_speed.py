@@ -19,6 +19,8 @@ def test_bench_speed_quick_writes_json_and_chart(tmp_path):
             assert ("koiter forces, atomic scatter", dtype, level) in kernels
             assert ("koiter forces, deterministic gather", dtype, level) in kernels
         assert ("numpy shell forces (koiter + volume)", "float64", level) in kernels
+        for ground in ("explicit ground", "implicit ground (8 sweeps)"):
+            assert (f"mechanics step, {ground}", "float32", level) in kernels
     for row in result["kernels"]:
         assert row["triangles"] == 20 * 4 ** row["level"]
         assert row["triangles_per_second"] * row["seconds"] == pytest.approx(row["triangles"])
