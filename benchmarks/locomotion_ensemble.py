@@ -15,16 +15,14 @@ from __future__ import annotations
 import argparse
 import csv
 import os
-import shutil
 import sys
-import tempfile
 from datetime import date
 
 import numpy as np
 
 from wavewarp.device import describe_device, device_tag, resolve_device
 from wavewarp.io import write_png, write_result
-from wavewarp.sweep import SweepSpec, sweep
+from wavewarp.sweep import SweepSpec, sweep_to_table
 
 SCENES = ("sphere-walker", "prism-walker")
 AC = ("0", "0.05", "0.1", "0.15", "0.2", "0.25", "0.3")
@@ -33,17 +31,10 @@ AC = ("0", "0.05", "0.1", "0.15", "0.2", "0.25", "0.3")
 def run_scene(scene: str, args, device) -> list:
     """The scene's sweep over AC × sensitive × seeds on `device`'s kind; its table rows."""
     grid = {"AC": list(args.ac), "sensitive": ["true", "false"]}
-    fixed = (f"noise={args.noise}", *args.set)
-    out = tempfile.mkdtemp(prefix=f"wavewarp-ensemble-{scene}-")
-    try:
-        spec = SweepSpec(scene, grid=grid, seeds=args.seeds, fixed=fixed, quick=args.quick,
-                         device="cuda" if device.is_cuda else "cpu")  # fmt: skip
-        rows = sweep(spec, out, batch=args.batch, progress=True)
-        table = os.path.join(args.out, f"locomotion_ensemble_{scene}_{device_tag(device)}.csv")
-        shutil.copy(os.path.join(out, "table.csv"), table)
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
-    return rows
+    spec = SweepSpec(scene, grid=grid, seeds=args.seeds, fixed=(f"noise={args.noise}", *args.set), quick=args.quick,
+                     device="cuda" if device.is_cuda else "cpu")  # fmt: skip
+    table = os.path.join(args.out, f"locomotion_ensemble_{scene}_{device_tag(device)}.csv")
+    return sweep_to_table(spec, table, batch=args.batch)
 
 
 def read_table(path: str) -> list:

@@ -22,9 +22,7 @@ import csv
 import glob
 import math
 import os
-import shutil
 import sys
-import tempfile
 from datetime import date
 
 import matplotlib
@@ -36,7 +34,7 @@ import numpy as np  # noqa: E402
 
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
-from wavewarp.sweep import SweepSpec, sweep  # noqa: E402
+from wavewarp.sweep import SweepSpec, sweep_to_table  # noqa: E402
 
 SCENES = ("sphere-walker", "prism-walker")
 REGIMES = {
@@ -47,19 +45,12 @@ REGIMES = {
 }  # fmt: skip
 
 
-def run_regime(regime: str, scene: str, args, device) -> str:
-    """The sweep of `scene`'s twins over the seeds in `regime`; the path of its kept table."""
+def run_regime(regime: str, scene: str, args, device) -> None:
+    """The sweep of `scene`'s twins over the seeds in `regime`, its table kept as OUT/REGIME_SCENE.csv."""
     fixed = (f"noise={args.noise}", f"periods={args.periods}", *REGIMES[regime], *args.set)
-    out = tempfile.mkdtemp(prefix=f"wavewarp-regimes-{scene}-")
-    try:
-        spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
-                         device="cuda" if device.is_cuda else "cpu")  # fmt: skip
-        sweep(spec, out, batch=args.seeds, progress=True)
-        table = os.path.join(args.out, f"{regime}_{scene}.csv")
-        shutil.copy(os.path.join(out, "table.csv"), table)
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
-    return table
+    spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
+                     device="cuda" if device.is_cuda else "cpu")  # fmt: skip
+    sweep_to_table(spec, os.path.join(args.out, f"{regime}_{scene}.csv"), batch=args.seeds)
 
 
 def twin(rows: list, sensitive: bool) -> dict:

@@ -111,6 +111,33 @@ def contact_indicator_kernel(p: wp.array(dtype=Any), active: wp.array(dtype=Any)
         active[i] = type(p[i])(type(z)(1.0), zero, zero)
 
 
+@wp.func
+def limit_inverse_mass_gather(
+    load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), ring_start: wp.array(dtype=wp.int32),
+    ring: wp.array(dtype=wp.int32), centre_weight: wp.array(dtype=Any), ring_weight: wp.array(dtype=Any), i: int,
+):  # fmt: skip
+    """(L M⁻¹ load)_i: limit point i's velocity change per unit scale under the control-point forces `load`."""
+    s = centre_weight[i] * inverse_mass[i] * load[i]
+    for k in range(ring_start[i], ring_start[i + 1]):
+        j = ring[k]
+        s += ring_weight[i] * inverse_mass[j] * load[j]
+    return s
+
+
+@wp.func
+def patch_inverse_mass_gather(
+    load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32), basis: wp.array2d(dtype=Any), t: int, row: int,
+):  # fmt: skip
+    """Σ_J N_J(q) load_J / M_J over triangle t's patch at basis row `row` (quadrature point q)."""
+    start = patch_start[t]
+    s = basis[row, 0][0] * inverse_mass[patch_vertices[start]] * load[patch_vertices[start]]
+    for k in range(1, patch_start[t + 1] - start):
+        j = patch_vertices[start + k]
+        s += basis[row, k][0] * inverse_mass[j] * load[j]
+    return s
+
+
 @wp.kernel
 def limit_response_kernel(
     load: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), ring_start: wp.array(dtype=wp.int32),
@@ -119,11 +146,7 @@ def limit_response_kernel(
 ):  # fmt: skip
     """response_i = Σ_J L_iJ load_J,x / M_J with load = Lᵀ(unit load on the contact set): the row sums of L M⁻¹ Lᵀ."""
     i = wp.tid()
-    s = centre_weight[i] * load[i][0] * inverse_mass[i]
-    for k in range(ring_start[i], ring_start[i + 1]):
-        j = ring[k]
-        s += ring_weight[i] * load[j][0] * inverse_mass[j]
-    response[i] = s
+    response[i] = limit_inverse_mass_gather(load, inverse_mass, ring_start, ring, centre_weight, ring_weight, i)[0]
 
 
 @wp.kernel
@@ -135,12 +158,7 @@ def quadrature_response_kernel(
     """response_q = Σ_J N_J(q) load_J,x / M_J, load_J = Σ_{q' in contact} N_J(q') dω̄⁰_q': per unit pressure."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    start = patch_start[t]
-    s = inverse_mass[0] - inverse_mass[0]
-    for k in range(patch_start[t + 1] - start):
-        j = patch_vertices[start + k]
-        s += basis[row, k][0] * load[j][0] * inverse_mass[j]
-    response[q] = s
+    response[q] = patch_inverse_mass_gather(load, inverse_mass, patch_start, patch_vertices, basis, t, row)[0]
 
 
 @wp.kernel
@@ -153,10 +171,7 @@ def limit_coupled_velocity_kernel(
     """others_i = u*_i + scale (L M⁻¹ load)_i - r_i f_i with load = Lᵀ f: point i's end-of-step velocity under every
     contact force but its own (a Jacobi sweep of the coupled contact problem)."""
     i = wp.tid()
-    s = centre_weight[i] * inverse_mass[i] * load[i]
-    for k in range(ring_start[i], ring_start[i + 1]):
-        j = ring[k]
-        s += ring_weight[i] * inverse_mass[j] * load[j]
+    s = limit_inverse_mass_gather(load, inverse_mass, ring_start, ring, centre_weight, ring_weight, i)
     others[i] = predictor[i] + scale * (s - response[i] * limit_forces[i])
 
 
@@ -170,11 +185,7 @@ def quadrature_coupled_velocity_kernel(
     """`limit_coupled_velocity_kernel` on the quadrature points (load = Σ_q N_I(q) f_q dω̄⁰_q, f a pressure)."""
     q = wp.tid()
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    start = patch_start[t]
-    s = predictor[q] - predictor[q]
-    for k in range(patch_start[t + 1] - start):
-        j = patch_vertices[start + k]
-        s += (basis[row, k][0] * inverse_mass[j]) * load[j]
+    s = patch_inverse_mass_gather(load, inverse_mass, patch_start, patch_vertices, basis, t, row)
     others[q] = predictor[q] + scale * (s - response[q] * limit_forces[q])
 
 

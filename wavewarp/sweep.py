@@ -346,3 +346,15 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     write_table(rows, os.path.join(out, "table.csv"))
     sweep_chart_png(rows, list(spec.grid), spec.measure, os.path.join(out, "chart.png"), title=spec.scene)
     return rows
+
+
+def sweep_to_table(spec: SweepSpec, table: str, *, batch: int = 1, progress: bool = True) -> list:
+    """`sweep` of `spec` in a temporary folder (removed at the end), keeping only its table, copied to
+    `table`; returns the table's rows."""
+    out = tempfile.mkdtemp(prefix=f"wavewarp-{spec.scene}-")
+    try:
+        rows = sweep(spec, out, batch=batch, progress=progress)
+        shutil.copy(os.path.join(out, "table.csv"), table)
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+    return rows
