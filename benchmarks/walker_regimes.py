@@ -36,12 +36,16 @@ from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.sweep import SweepSpec, sweep_to_table  # noqa: E402
 
-SCENES = ("sphere-walker", "prism-walker")
+SCENES = ("sphere-walker", "prism-walker", "cube-walker")
+OVERDAMPED = ["mechanics=overdamped", "contact_solve=implicit"]
 REGIMES = {
     "inertial-explicit-kf0.1": [],  # the scenes' defaults: friction a weak viscous drag
     "inertial-implicit-coulomb": ["contact_solve=implicit", "sharpness=inf"],
-    "overdamped-implicit-kf1000": ["mechanics=overdamped", "contact_solve=implicit", "sharpness=1000"],
-    "overdamped-implicit-coulomb": ["mechanics=overdamped", "contact_solve=implicit", "sharpness=inf"],
+    # overdamped at the default drag ζ = 2 η_ground ≈ 61: ζ / (μ k_f g) from 1.2e4 (k_f = 0.1) to 0 (Coulomb)
+    **{f"overdamped-implicit-kf{k}": [*OVERDAMPED, f"sharpness={k}"] for k in ("0.1", "1", "10", "100", "1000")},
+    "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],
+    # a third of the drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
+    "overdamped-implicit-coulomb-drag20": [*OVERDAMPED, "sharpness=inf", "drag=20"],
 }  # fmt: skip
 
 
@@ -54,14 +58,17 @@ def run_regime(regime: str, scene: str, args, device) -> None:
 
 
 def twin(rows: list, sensitive: bool) -> dict:
-    """n, speeds, mean, sd, share moving forward and mean period of one twin's seeds."""
+    """n, speeds, mean, sd, share moving forward, mean period and (tables that have it) the mean rolling
+    angle over the run, in degrees, of one twin's seeds."""
     chosen = [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
     speeds = [float(r["speed_R_per_T"]) for r in chosen]
+    rolling = [float(r["rolling_angle_deg"]) for r in chosen if r.get("rolling_angle_deg")]
     n = len(speeds)
     return {"n": n, "speeds": speeds, "mean": float(np.mean(speeds)) if n else None,
             "sd": float(np.std(speeds, ddof=1)) if n > 1 else 0.0,
             "forward_share": sum(s > 0 for s in speeds) / n if n else None,
-            "period": float(np.mean([float(r["period"]) for r in chosen])) if n else None}  # fmt: skip
+            "period": float(np.mean([float(r["period"]) for r in chosen])) if n else None,
+            "rolling_angle_deg": float(np.mean(rolling)) if rolling else None}  # fmt: skip
 
 
 def twins(rows: list) -> dict:

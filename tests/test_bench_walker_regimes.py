@@ -25,13 +25,15 @@ SPEEDS = {  # (regime, scene, sensitive): speeds of four seeds
 def write_tables(folder):
     for regime, scene in {(r, s) for r, s, _ in SPEEDS}:
         with open(folder / f"{regime}_{scene}.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "period", "speed_R_per_T"])
+            writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "period", "speed_R_per_T",
+                                                       "rolling_angle_deg"])
             writer.writeheader()
             for sensitive in (True, False):
                 for seed, speed in enumerate(SPEEDS[(regime, scene, sensitive)]):
                     writer.writerow({"point": f"sensitive={str(sensitive).lower()}_seed={seed}",
                                      "sensitive": str(sensitive).lower(), "seed": seed, "status": "done",
-                                     "period": 260.0 if sensitive else 280.0, "speed_R_per_T": speed})  # fmt: skip
+                                     "period": 260.0 if sensitive else 280.0, "speed_R_per_T": speed,
+                                     "rolling_angle_deg": 90.0 * speed + seed})  # fmt: skip
 
 
 def test_walker_regimes_summarises_twins_and_checks_the_papers_claims(tmp_path):
@@ -44,6 +46,7 @@ def test_walker_regimes_summarises_twins_and_checks_the_papers_claims(tmp_path):
         assert twin["n"] == 4 and twin["mean"] == pytest.approx(np.mean(speeds), rel=1e-12)
         assert twin["sd"] == pytest.approx(np.std(speeds, ddof=1), rel=1e-12)
         assert twin["forward_share"] == np.mean(np.array(speeds) > 0)
+        assert twin["rolling_angle_deg"] == pytest.approx(np.mean(90.0 * np.array(speeds) + np.arange(4)), rel=1e-12)
     cell = result["regimes"]["inertial-implicit-coulomb"]["scenes"]["prism-walker"]
     s, i = np.array(SPEEDS[("inertial-implicit-coulomb", "prism-walker", True)]), np.array(SPEEDS[("inertial-implicit-coulomb", "prism-walker", False)])  # fmt: skip
     ratio = s.mean() / i.mean()

@@ -8,8 +8,13 @@ import json
 import h5py
 import numpy as np
 import pytest
+import warp as wp
+
+from scipy.spatial.transform import Rotation
 
 from wavewarp.cli import main
+from wavewarp.measurements import BodyRotation, best_rotation
+from wavewarp.mesh import icosphere
 from wavewarp.parameters import load_scene, resolve
 
 
@@ -108,6 +113,50 @@ def test_mirrored_origin_mirrors_the_walk(scene):
     scale = np.abs(com[0]).max()
     assert np.abs(com[1] - com[0] * [-1.0, 1.0, 1.0]).max() < 1e-6 * scale
     assert np.abs(com[0][:, 1]).max() < 1e-8 * scale
+    # the mirror flips the turn about y and the forward direction: the rolling angle is the same
+    rolling = [run.measurements()["rolling_angle_deg"] for run in runs]
+    assert abs(rolling[0]) > 1e-4 and rolling[1] == pytest.approx(rolling[0], rel=1e-6)
+
+
+def test_body_rotation_recovers_a_rigid_roll_and_ignores_a_symmetric_deformation():
+    """A sphere rolled forward without slip by distance d turns by d/R about z × forward; a uniform
+    scaling about the centre of mass and a translation add no rotation; non-uniform masses (a rigid
+    motion is fitted exactly whatever the weights)."""
+    rng = np.random.default_rng(3)
+    reference = icosphere(25.0, 2).vertices.copy()
+    mass = rng.uniform(0.5, 2.0, len(reference))
+    forward = np.array([np.cos(0.4), np.sin(0.4), 0.0])
+    side = np.cross([0.0, 0.0, 1.0], forward)
+    tracker = BodyRotation(np.concatenate([mass, mass]), worlds=2)
+    tracker.record(np.concatenate([reference, reference]))
+    for distance in (5.0, 31.0):  # 11.5° and 71°
+        rolled = Rotation.from_rotvec(distance / 25.0 * side).apply(reference) + distance * forward
+        turned = Rotation.from_rotvec([0.1, -0.2, 0.3]).apply(1.03 * reference) + [1.0, 2.0, 3.0]
+        tracker.record(np.concatenate([rolled, turned]))
+    rolled, turned = tracker.measurements(forward, 0), tracker.measurements(forward, 1)
+    assert rolled["rolling_angle_deg"] == pytest.approx(np.degrees(31.0 / 25.0), rel=1e-12)
+    assert rolled["max_rotation_deg"] == pytest.approx(rolled["rotation_deg"], rel=1e-12)
+    assert turned["rotation_deg"] == pytest.approx(np.degrees(np.linalg.norm([0.1, -0.2, 0.3])), rel=1e-12)
+    assert turned["rolling_angle_deg"] == pytest.approx(np.degrees(np.array([0.1, -0.2, 0.3]) @ side), rel=1e-12)
+    assert best_rotation(reference, reference + 7.0, mass) == pytest.approx(np.zeros(3), abs=1e-14)
+
+
+@pytest.mark.slow
+def test_an_overdamped_walker_starts_the_wave_settled():
+    """Put down, the walker must be at rest in its sag before the wave starts: with c = 0, 20 more time
+    units of the overdamped mechanics leave its centre of mass where it was (to 1% of the sag). Settled
+    overdamped alone for 40 time units, this level-3 sphere still sagged by 7% more over the next 40."""
+    module = load_scene("sphere-walker")
+    p = resolve(module.Parameters, module.QUICK, ["level=3", "mechanics=overdamped", "contact_solve=implicit",
+                                                  "sharpness=inf", "periods=0.01", "frames=1"])  # fmt: skip
+    run = module.build(p, device="cpu", report=lambda message: None)
+    dynamics, shell = run.dynamics, run.shell
+    shell.update_reference(wp.zeros(shell.mesh.n_vertices, dtype=shell.scalar, device=shell.device))
+    before = dynamics.center_of_mass()
+    sag = run.rest_height - before[2]
+    dynamics.run_until(dynamics.time + 20.0)
+    assert sag > 0.005 * run.radius
+    assert np.linalg.norm(dynamics.center_of_mass() - before) < 0.01 * sag
 
 
 @pytest.mark.slow

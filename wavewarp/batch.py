@@ -25,11 +25,11 @@ from .coupled import Walking
 from .driver import FAILURES
 from .initial import gaussian_pulse
 from .laplace import LaplaceBeltrami
-from .measurements import locomotion
+from .measurements import BodyRotation, locomotion
 from .mesh import Mesh
 from .parameters import as_dict
 from .runs import WaveClock, imperfect, mean_edge
-from .walker import AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, walker_dynamics, walker_model
+from .walker import AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, settled_walker_dynamics, walker_model
 
 PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "mirror", "noise")  # and the seed: the rest is shared
 
@@ -111,10 +111,9 @@ class WalkerBatch(WorldsRun):
         self.mesh = Mesh.union(self.world_meshes)
         self.model = walker_model(self.mesh, ps, placed[0].ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
-        self.dynamics = walker_dynamics(self.model, p)
+        # settle_dt: the step while settling (a single run given it settles alike)
+        self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
-        self.settle_dt = self.dynamics.dt  # the step while settling; the coupling divides the chemistry's
-        self.dynamics.run_until(p.settle)
         n = self.vertices = self.mesh.vertices_per_world
         self._slices = [slice(w * n, (w + 1) * n) for w in range(self.worlds)]
         settled, mass = self.dynamics.positions(), self.dynamics.mass
@@ -130,6 +129,7 @@ class WalkerBatch(WorldsRun):
         mass, c = self.operator.mass(), self.wave.concentration()
         self.initial_totals = np.array([float(mass[s] @ c[s]) for s in self._slices])  # as WalkerRun's total()
         self.balance = ChemicalBalance(self.mesh, sensitive=p.sensitive, rule=rule, device=device, dtype=p.dtype)
+        self.rotation = BodyRotation(self.dynamics.mass, self.worlds)
         self.arrival = FirstArrival(c0, device=self.shell.device, scalar=self.shell.scalar)
         self.steps_per_frame = max(1, round(t_end / p.frames / self.wave.dt))
         with wp.ScopedDevice(self.shell.device):
@@ -207,8 +207,9 @@ class WalkerBatch(WorldsRun):
     def record(self) -> None:
         """The chemical balance of every world at the current frame."""
         produced = self._per_world(self.wave.produced_per_vertex().astype(np.float64))
-        self.balance.record(self.time, self.dynamics.positions(), self.wave.concentration(),
-                            self.initial_totals + produced)  # fmt: skip
+        positions = self.dynamics.positions()
+        self.balance.record(self.time, positions, self.wave.concentration(), self.initial_totals + produced)
+        self.rotation.record(positions)
 
     def _record(self, writers, stopped_after: dict) -> None:
         """The balance of every world, and each running world's frame into its writer."""
@@ -225,7 +226,7 @@ class WalkerBatch(WorldsRun):
                 "contact_depth_R": placed.depth / self.radius, **self.balance.measurements(w),
                 **arrival_measurements(self.arrival.times(self.wave.dt)[self._slices[w]]),
                 **locomotion(self.traces[w], placed.forward, self.radius, self.rest_heights[w],
-                             self.period_kinetic)}  # fmt: skip
+                             self.period_kinetic), **self.rotation.measurements(placed.forward, w)}  # fmt: skip
 
 
 def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print) -> WalkerBatch:

@@ -2,8 +2,8 @@
 
 Oocytes and buckling: the first front's arrival times (`ArrivalTimes`), the wave's speed and
 rotational symmetry, the shell's shape asymmetry, the buckling symmetry number n at the front
-(docs/theory/scenes.md). Walkers: the oscillation period, the displacement and the speed in R per T
-(docs/theory/dynamics.md). Box scenes: wavewarp/boxes.py.
+(docs/theory/scenes.md). Walkers: the oscillation period, the displacement and the speed in R per T,
+the body's rotation (rolling) (docs/theory/dynamics.md). Box scenes: wavewarp/boxes.py.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .geometry import limit_surface
 from .runs import mean_edge
@@ -247,3 +248,43 @@ def locomotion(trace: np.ndarray, forward, radius: float, rest_height: float, pe
         out.update(period=period, pulse_displacements_R=(np.diff(along) / radius).tolist(),
                    pulse_alignment=alignment.tolist(), speed_R_per_T=float((along[-1] - along[0]) / radius / (len(crossings) - 1)))  # fmt: skip
     return out
+
+
+def best_rotation(reference: np.ndarray, x: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """The rotation vector (radians) of the rotation that best carries `reference` onto `x` about their
+    centres of mass, in the mass-weighted least-squares sense (Kabsch)."""
+    p = reference - mass @ reference / mass.sum()
+    q = x - mass @ x / mass.sum()
+    u, _, vt = np.linalg.svd((p * mass[:, None]).T @ q)
+    flip = np.sign(np.linalg.det(vt.T @ u.T))
+    return Rotation.from_matrix(vt.T @ np.diag([1.0, 1.0, flip]) @ u.T).as_rotvec()
+
+
+class BodyRotation:
+    """How far a walker turned as a body: at every recorded frame, the best-fit rotation (`best_rotation`)
+    from the first frame's shape; per world of a batch (worlds of equal vertex counts).
+
+    `rolling_angle_deg`: the last frame's rotation about the horizontal axis z × forward, positive when
+    the top moves forward (a ball rolling forward without slip turns by its distance / R);
+    `rotation_deg` its whole angle; `max_rotation_deg` the largest whole angle over the frames."""
+
+    def __init__(self, mass: np.ndarray, worlds: int = 1):
+        self.mass, self.worlds = np.asarray(mass, dtype=np.float64), worlds
+        self.reference = None
+        self.rotations = []  # per frame: (worlds, 3) rotation vectors
+
+    def record(self, positions) -> None:
+        x = np.asarray(positions, dtype=np.float64).reshape(self.worlds, -1, 3)
+        if self.reference is None:
+            self.reference = x.copy()
+        mass = self.mass.reshape(self.worlds, -1)
+        self.rotations.append(np.array([best_rotation(r, xw, m) for r, xw, m in zip(self.reference, x, mass)]))
+
+    def measurements(self, forward, world: int = 0) -> dict:
+        if not self.rotations:
+            return {"rolling_angle_deg": None, "rotation_deg": None, "max_rotation_deg": None}
+        side = np.cross([0.0, 0.0, 1.0], np.asarray(forward, dtype=np.float64))
+        rotations = np.array(self.rotations)[:, world]
+        angles = np.degrees(np.linalg.norm(rotations, axis=1))
+        return {"rolling_angle_deg": float(np.degrees(rotations[-1] @ side)), "rotation_deg": float(angles[-1]),
+                "max_rotation_deg": float(angles.max())}
