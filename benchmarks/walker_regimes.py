@@ -12,7 +12,8 @@ speed_R_per_T (the forward displacement per pulse, in R), the share of seeds mov
 and the mean period; per regime and scene the twins' speed ratio (sensitive / insensitive, its
 spread from the two standard errors) and period ratio; and the paper's three claims checked — every
 twin moves along the wave, the sensitive sphere is faster (by more than two standard errors), the
-sensitive prism is more than twice as fast as its twin — and OUT/walker_regimes.png.
+sensitive prism is more than twice as fast as its twin (undecided, null, with one seed a twin) — and
+OUT/walker_regimes.png.
 """
 
 from __future__ import annotations
@@ -44,8 +45,12 @@ REGIMES = {
     # overdamped at the default drag ζ = 2 η_ground ≈ 61: ζ / (μ k_f g) from 1.2e4 (k_f = 0.1) to 0 (Coulomb)
     **{f"overdamped-implicit-kf{k}": [*OVERDAMPED, f"sharpness={k}"] for k in ("0.1", "1", "10", "100", "1000")},
     "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],
-    # a third of the drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
+    # less drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
     "overdamped-implicit-coulomb-drag20": [*OVERDAMPED, "sharpness=inf", "drag=20"],
+    "overdamped-implicit-coulomb-drag6": [*OVERDAMPED, "sharpness=inf", "drag=6"],
+    # softer shells: the sphere sags 5.5% and 18% of R (1.3% at the default Y = 200)
+    "overdamped-implicit-coulomb-young55": [*OVERDAMPED, "sharpness=inf", "young=55", "settle=100"],
+    "overdamped-implicit-coulomb-young12": [*OVERDAMPED, "sharpness=inf", "young=12", "settle=100"],
 }  # fmt: skip
 
 
@@ -58,17 +63,20 @@ def run_regime(regime: str, scene: str, args, device) -> None:
 
 
 def twin(rows: list, sensitive: bool) -> dict:
-    """n, speeds, mean, sd, share moving forward, mean period and (tables that have it) the mean rolling
-    angle over the run, in degrees, of one twin's seeds."""
+    """n, speeds, mean, sd, share moving forward, mean period and (tables that have them) the mean rolling
+    angle over the run, in degrees, and the mean settled sag / R of one twin's seeds."""
     chosen = [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
     speeds = [float(r["speed_R_per_T"]) for r in chosen]
-    rolling = [float(r["rolling_angle_deg"]) for r in chosen if r.get("rolling_angle_deg")]
     n = len(speeds)
+
+    def mean(key):
+        values = [float(r[key]) for r in chosen if r.get(key)]
+        return float(np.mean(values)) if values else None
+
     return {"n": n, "speeds": speeds, "mean": float(np.mean(speeds)) if n else None,
             "sd": float(np.std(speeds, ddof=1)) if n > 1 else 0.0,
             "forward_share": sum(s > 0 for s in speeds) / n if n else None,
-            "period": float(np.mean([float(r["period"]) for r in chosen])) if n else None,
-            "rolling_angle_deg": float(np.mean(rolling)) if rolling else None}  # fmt: skip
+            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R")}  # fmt: skip
 
 
 def twins(rows: list) -> dict:
@@ -84,8 +92,10 @@ def twins(rows: list) -> dict:
 
 def claims(scenes: dict) -> dict:
     """The paper's claims for one regime (None where a scene is missing)."""
-    def separated(cell):
+    def separated(cell):  # None with fewer than two seeds a twin: no spread to separate them by
         s, i = cell["sensitive"], cell["insensitive"]
+        if min(s["n"], i["n"]) < 2:
+            return None
         error = math.hypot(s["sd"] / math.sqrt(s["n"]), i["sd"] / math.sqrt(i["n"]))
         return s["mean"] - i["mean"] > 2 * error
 
@@ -118,21 +128,26 @@ def read_tables(folder: str, regimes, scenes) -> dict:
     return tables
 
 
+def short(regime: str) -> str:
+    return regime.replace("overdamped-implicit-", "overdamped ").replace("inertial-implicit-", "inertial ").replace(
+        "inertial-explicit-", "inertial explicit ").replace("coulomb-", "coulomb ")
+
+
 def chart(result: dict, path: str) -> None:
     scenes = [s for s in SCENES if any(s in r["scenes"] for r in result["regimes"].values())]
-    regimes = list(result["regimes"])
-    fig, axes = plt.subplots(1, len(scenes), figsize=(6.0 * len(scenes), 4.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.0 * len(scenes), 5.2), squeeze=False)
     for ax, scene in zip(axes[0], scenes):
+        regimes = [r for r in REGIMES if r in result["regimes"] and scene in result["regimes"][r]["scenes"]]
         for k, (key, label) in enumerate((("sensitive", "sensitive"), ("insensitive", "insensitive twin"))):
-            cells = [(x, result["regimes"][r]["scenes"].get(scene)) for x, r in enumerate(regimes)]
-            cells = [(x + (0.12 if k == 0 else -0.12), c[key]) for x, c in cells if c and c[key]["n"]]
+            cells = [(x, result["regimes"][r]["scenes"][scene]) for x, r in enumerate(regimes)]
+            cells = [(x + (0.12 if k == 0 else -0.12), c[key]) for x, c in cells if c[key]["n"]]
             ax.errorbar([x for x, _ in cells], [c["mean"] for _, c in cells], yerr=[c["sd"] for _, c in cells], fmt="o",
                         color=f"C{k}", capsize=3, label=f"{label}, mean ± sd")  # fmt: skip
             for x, c in cells:
                 ax.plot([x] * c["n"], c["speeds"], ".", color=f"C{k}", alpha=0.35, ms=4)
         ax.axhline(0.0, color="grey", lw=0.8)
         ax.set_yscale("symlog", linthresh=1e-4)
-        ax.set_xticks(range(len(regimes)), [r.replace("-", "\n", 1) for r in regimes], fontsize=7)
+        ax.set_xticks(range(len(regimes)), [short(r) for r in regimes], fontsize=7, rotation=60, ha="right")
         ax.set_ylabel("speed (R per T, forward = along the wave)")
         ax.set_title(scene)
         ax.legend(fontsize=7)

@@ -26,14 +26,14 @@ def write_tables(folder):
     for regime, scene in {(r, s) for r, s, _ in SPEEDS}:
         with open(folder / f"{regime}_{scene}.csv", "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "period", "speed_R_per_T",
-                                                       "rolling_angle_deg"])
+                                                       "rolling_angle_deg", "sag_R"])
             writer.writeheader()
             for sensitive in (True, False):
                 for seed, speed in enumerate(SPEEDS[(regime, scene, sensitive)]):
                     writer.writerow({"point": f"sensitive={str(sensitive).lower()}_seed={seed}",
                                      "sensitive": str(sensitive).lower(), "seed": seed, "status": "done",
                                      "period": 260.0 if sensitive else 280.0, "speed_R_per_T": speed,
-                                     "rolling_angle_deg": 90.0 * speed + seed})  # fmt: skip
+                                     "rolling_angle_deg": 90.0 * speed + seed, "sag_R": 0.01 * (seed + 1)})  # fmt: skip
 
 
 def test_walker_regimes_summarises_twins_and_checks_the_papers_claims(tmp_path):
@@ -47,6 +47,7 @@ def test_walker_regimes_summarises_twins_and_checks_the_papers_claims(tmp_path):
         assert twin["sd"] == pytest.approx(np.std(speeds, ddof=1), rel=1e-12)
         assert twin["forward_share"] == np.mean(np.array(speeds) > 0)
         assert twin["rolling_angle_deg"] == pytest.approx(np.mean(90.0 * np.array(speeds) + np.arange(4)), rel=1e-12)
+        assert twin["sag_R"] == pytest.approx(0.025, rel=1e-12)
     cell = result["regimes"]["inertial-implicit-coulomb"]["scenes"]["prism-walker"]
     s, i = np.array(SPEEDS[("inertial-implicit-coulomb", "prism-walker", True)]), np.array(SPEEDS[("inertial-implicit-coulomb", "prism-walker", False)])  # fmt: skip
     ratio = s.mean() / i.mean()
@@ -59,6 +60,15 @@ def test_walker_regimes_summarises_twins_and_checks_the_papers_claims(tmp_path):
     assert result["regimes"]["overdamped-implicit-coulomb"]["claims"] == {
         "forward": False, "sensitive_sphere_faster": False, "prism_ratio_above_2": False}
     assert (tmp_path / "walker_regimes.png").stat().st_size > 0
+
+
+def test_one_seed_a_twin_leaves_the_sphere_claim_undecided(tmp_path):
+    with open(tmp_path / "overdamped-implicit-coulomb-drag6_sphere-walker.csv", "w", newline="") as f:
+        f.write("point,sensitive,seed,status,period,speed_R_per_T\n"
+                "sensitive=true_seed=0,true,0,done,268,0.003\nsensitive=false_seed=0,false,0,done,278,0.002\n")
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    claims = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb-drag6"]["claims"]
+    assert claims == {"forward": True, "sensitive_sphere_faster": None, "prism_ratio_above_2": None}
 
 
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
