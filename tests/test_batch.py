@@ -164,7 +164,7 @@ def test_each_world_of_a_batched_relaxation_equals_its_own_relaxation_bit_for_bi
     per-world h, AC, AI, μV under per-world concentrations relax to their own shells' equilibria, the
     same iterations and energies, bit for bit (float64, CPU: every sum in a fixed order)."""
     meshes = noisy_spheres(3)
-    thickness, AC, AI, mu = [0.05, 0.08, 0.05], [0.3, 0.0, -0.2], [0.0, 0.4, 0.2], [5.0, 0.0, 10.0]
+    thickness, AC, AI, mu = [0.05, 0.08, 0.05], [0.3, 0.0, 0.2], [0.0, 0.4, 0.2], [5.0, 0.0, 10.0]
     c = [np.full(m.n_vertices, value) for m, value in zip(meshes, (0.5, 0.8, 0.3))]
     batch = Shell(Mesh.union(meshes), thickness, 1.0, AC=AC, AI=AI, volume_penalty=mu, dtype="float64", device="cpu")
     x = batch.relax(batch.mesh.vertices, np.concatenate(c), method="ncg")

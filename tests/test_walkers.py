@@ -84,13 +84,14 @@ def test_resumed_walker_continues_the_same_trajectory(tmp_path, capsys):
     """A walker resumed from its HDF5 file (positions, velocities, c, w) ends where the uninterrupted run does,
     with the same measurements."""
     whole, part = tmp_path / "whole.h5", tmp_path / "part.h5"
-    options = ["--set", "periods=0.4", "--set", "frames=4", "--set", "dtype=float64", "--device", "cpu", "--quick"]
+    options = ["--set", "periods=0.2", "--set", "frames=4", "--set", "dtype=float64", "--set", "settle=10", "--device",
+               "cpu", "--quick"]  # fmt: skip
     assert run_cli(capsys, "sphere-walker", *options, "--out", str(tmp_path / "a.usda"), "--h5", str(whole))[0] == 0
-    short = [o.replace("frames=4", "frames=2").replace("periods=0.4", "periods=0.2") for o in options]
+    short = [o.replace("frames=4", "frames=2").replace("periods=0.2", "periods=0.1") for o in options]
     assert run_cli(capsys, "sphere-walker", *short, "--out", str(tmp_path / "b.usda"), "--h5", str(part))[0] == 0
     with h5py.File(part, "r+") as f:  # continue the half-length run to the full length
         parameters = json.loads(f.attrs["parameters"])
-        parameters.update(periods=0.4, frames=4)
+        parameters.update(periods=0.2, frames=4)
         f.attrs["parameters"] = json.dumps(parameters)
     code, _, err = run_cli(capsys, "sphere-walker", "--resume", "--h5", str(part), "--device", "cpu", "--out",
                            str(tmp_path / "c.usda"))  # fmt: skip
@@ -107,7 +108,7 @@ def test_mirrored_origin_mirrors_the_walk(scene):
     """The meshes are mirror-symmetric in x (and in y, the plane holding the origin): started at
     the mirror image of the origin, the centre of mass follows the mirror image of its path, and
     neither run drifts sideways (float64: the symmetry holds to round-off)."""
-    runs = [walk(scene, periods=0.6, frames=3, dtype="float64", mirror=mirror) for mirror in (False, True)]
+    runs = [walk(scene, periods=0.6, frames=3, dtype="float64", settle=10, mirror=mirror) for mirror in (False, True)]
     com = [run.trace[:, 2:5] - run.trace[0, 2:5] for run in runs]
     assert np.abs(com[0][:, 0]).max() > 1e-3 * runs[0].radius  # it moved
     scale = np.abs(com[0]).max()

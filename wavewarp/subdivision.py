@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import functools
 
+import math
+
 import numpy as np
 
 from .topology import Topology
@@ -124,16 +126,38 @@ def _box_spline_terms():
 
 
 _BOX_SPLINE_TERMS = _box_spline_terms()
+# derivatives along θ1 = v and θ2 = w with u = 1 - v - w: d/dθ1 = ∂v - ∂u, d/dθ2 = ∂w - ∂u
+_DIRECTIONS = (
+    [((0, 0, 0), 1.0)],  # value
+    [((0, 1, 0), 1.0), ((1, 0, 0), -1.0)],  # d/dθ1
+    [((0, 0, 1), 1.0), ((1, 0, 0), -1.0)],  # d/dθ2
+    [((0, 2, 0), 1.0), ((1, 1, 0), -2.0), ((2, 0, 0), 1.0)],  # d²/dθ1²
+    [((0, 1, 1), 1.0), ((1, 1, 0), -1.0), ((1, 0, 1), -1.0), ((2, 0, 0), 1.0)],  # d²/dθ1dθ2
+    [((0, 0, 2), 1.0), ((1, 0, 1), -2.0), ((2, 0, 0), 1.0)],  # d²/dθ2²
+)
 
 
-def _monomial(power, x, order):
-    """d^order/dx^order of x^power."""
-    if order > power:
-        return np.zeros_like(x)
-    factor = 1.0
-    for k in range(order):
-        factor *= power - k
-    return factor * x ** (power - order)
+def _falling_factorial(power: int, order: int) -> float:
+    """d^order/dx^order x^power = this × x^(power - order) (0 where order > power)."""
+    return float(math.prod(range(power - order + 1, power + 1))) if order <= power else 0.0
+
+
+def _basis_tensor() -> tuple:
+    """(exponents (M, 3), tensor (M, 12, 6)): the box splines and their derivatives as sums over the
+    monomials u^a v^b w^c of degree <= 4, so that a basis is one product with the monomials' values."""
+    exponents = [(a, b, c) for a in range(5) for b in range(5) for c in range(5) if a + b + c <= 4]
+    position = {e: n for n, e in enumerate(exponents)}
+    tensor = np.zeros((len(exponents), 12, N_BASIS_COLUMNS))
+    for column, combination in enumerate(_DIRECTIONS):
+        for index, coefficient, i, j, k in _BOX_SPLINE_TERMS:
+            for (du, dv, dw), sign in combination:
+                if du <= i and dv <= j and dw <= k:
+                    factor = _falling_factorial(i, du) * _falling_factorial(j, dv) * _falling_factorial(k, dw)
+                    tensor[position[(i - du, j - dv, k - dw)], index, column] += sign * coefficient * factor
+    return np.array(exponents), tensor
+
+
+_EXPONENTS, _BASIS_TENSOR = _basis_tensor()
 
 
 def regular_basis(v, w) -> np.ndarray:
@@ -145,27 +169,9 @@ def regular_basis(v, w) -> np.ndarray:
     v = np.atleast_1d(np.asarray(v, dtype=np.float64))
     w = np.atleast_1d(np.asarray(w, dtype=np.float64))
     u = 1.0 - v - w
-    # derivatives along θ1 = v and θ2 = w with u = 1 - v - w: d/dθ1 = ∂v - ∂u, d/dθ2 = ∂w - ∂u
-    directions = {
-        (0, 0): [((0, 0, 0), 1.0)],
-        (1, 0): [((0, 1, 0), 1.0), ((1, 0, 0), -1.0)],
-        (0, 1): [((0, 0, 1), 1.0), ((1, 0, 0), -1.0)],
-        (2, 0): [((0, 2, 0), 1.0), ((1, 1, 0), -2.0), ((2, 0, 0), 1.0)],
-        (1, 1): [((0, 1, 1), 1.0), ((1, 1, 0), -1.0), ((1, 0, 1), -1.0), ((2, 0, 0), 1.0)],
-        (0, 2): [((0, 0, 2), 1.0), ((1, 0, 1), -2.0), ((2, 0, 0), 1.0)],
-    }
-    out = np.zeros((len(v), 12, N_BASIS_COLUMNS))
-    for column, combination in enumerate(directions.values()):
-        for index, coefficient, i, j, k in _BOX_SPLINE_TERMS:
-            for (du, dv, dw), sign in combination:
-                out[:, index, column] += (
-                    sign
-                    * coefficient
-                    * _monomial(i, u, du)
-                    * _monomial(j, v, dv)
-                    * _monomial(k, w, dw)
-                )
-    return out
+    a, b, c = _EXPONENTS.T
+    monomials = u[:, None] ** a * v[:, None] ** b * w[:, None] ** c
+    return np.einsum("pm,mkc->pkc", monomials, _BASIS_TENSOR)
 
 
 # ---------------------------------------------------------------------------------------------
