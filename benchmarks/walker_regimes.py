@@ -1,5 +1,5 @@
-"""Walkers across mechanical regimes (Fig. 3a; docs/studies/2026-11-26-walker-regimes.md): the sphere and
-prism twins over seeds in each regime, against the paper's three claims.
+"""Walkers across mechanical regimes (Fig. 3a; docs/studies/2026-11-27-walker-regime-scans.md): the sphere,
+prism and cube twins over seeds in each regime, against the paper's three claims.
 
     wavewarp bench walker_regimes --device cuda --seeds 8 --periods 4 --out benchmarks/results/regimes
     wavewarp bench walker_regimes --tables benchmarks/results/regimes --device-name "NVIDIA H200"
