@@ -19,6 +19,7 @@ OUT/walker_regimes.png.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import csv
 import glob
 import math
@@ -33,9 +34,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from distributed import Client  # noqa: E402
+
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
-from wavewarp.sweep import SweepSpec, sweep_to_table  # noqa: E402
+from wavewarp.sweep import SweepSpec, local_cluster, sweep_to_table  # noqa: E402
 
 SCENES = ("sphere-walker", "prism-walker", "cube-walker")
 OVERDAMPED = ["mechanics=overdamped", "contact_solve=implicit"]
@@ -54,12 +57,24 @@ REGIMES = {
 }  # fmt: skip
 
 
-def run_regime(regime: str, scene: str, args, device) -> None:
-    """The sweep of `scene`'s twins over the seeds in `regime`, its table kept as OUT/REGIME_SCENE.csv."""
+def run_regime(regime: str, scene: str, args, device: str, executor) -> None:
+    """The sweep of `scene`'s twins over the seeds in `regime` on `executor`, its table kept as
+    OUT/REGIME_SCENE.csv."""
     fixed = (f"noise={args.noise}", f"periods={args.periods}", *REGIMES[regime], *args.set)
     spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
-                     device="cuda" if device.is_cuda else "cpu")  # fmt: skip
-    sweep_to_table(spec, os.path.join(args.out, f"{regime}_{scene}.csv"), batch=args.seeds)
+                     device=device)  # fmt: skip
+    sweep_to_table(spec, os.path.join(args.out, f"{regime}_{scene}.csv"), batch=args.seeds, progress=False,
+                   executor=executor)  # fmt: skip
+
+
+def run_regimes(pairs: list, args, device: str) -> None:
+    """Every (regime, scene) sweep at once on one local Dask cluster (one worker per GPU, or per core):
+    a sweep has only two batches (the twins), so sweeps one after another would leave GPUs idle."""
+    with local_cluster(device) as cluster, Client(cluster) as client:
+        executor = client.get_executor()
+        print(f"Dask: {len(client.scheduler_info()['workers'])} workers; dashboard {client.dashboard_link}")
+        with concurrent.futures.ThreadPoolExecutor(len(pairs)) as threads:
+            list(threads.map(lambda pair: run_regime(*pair, args, device, executor), pairs))  # raises a sweep's error
 
 
 def twin(rows: list, sensitive: bool) -> dict:
@@ -178,9 +193,7 @@ def main(argv=None) -> int:
         described = {"device_name": args.device_name}
     else:
         device = resolve_device(args.device)
-        for regime in args.regimes:
-            for scene in args.scenes:
-                run_regime(regime, scene, args, device)
+        run_regimes([(r, s) for r in args.regimes for s in args.scenes], args, "cuda" if device.is_cuda else "cpu")
         described = describe_device(device)
     tables = read_tables(args.tables or args.out, args.regimes, args.scenes)
     if not tables:

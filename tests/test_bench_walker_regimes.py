@@ -80,13 +80,16 @@ def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
 
 @pytest.mark.slow
 def test_walker_regimes_runs_its_sweeps_and_keeps_their_tables(tmp_path):
+    """Two regimes' sweeps side by side on one local cluster: each keeps its own table, and the summary
+    counts each table's seeds."""
     assert cli(["bench", "walker_regimes", "--quick", "--device", "cpu", "--seeds", "1", "--regimes",
-                "overdamped-implicit-coulomb", "--scenes", "prism-walker", "--periods", "0.05", "--set", "settle=1",
-                "--out", str(tmp_path)]) == 0  # fmt: skip
-    with open(tmp_path / "overdamped-implicit-coulomb_prism-walker.csv") as f:
-        rows = list(csv.DictReader(f))
-    assert sorted(r["sensitive"] for r in rows) == ["false", "true"] and all(r["status"] == "done" for r in rows)
+                "overdamped-implicit-coulomb", "inertial-implicit-coulomb", "--scenes", "prism-walker", "--periods",
+                "0.05", "--set", "settle=1", "--out", str(tmp_path)]) == 0  # fmt: skip
     result = json.loads((tmp_path / "walker_regimes.json").read_text())
-    cell = result["regimes"]["overdamped-implicit-coulomb"]["scenes"]["prism-walker"]
-    for key, sensitive in (("sensitive", "true"), ("insensitive", "false")):  # runs too short for a period count 0
-        assert cell[key]["n"] == sum(1 for r in rows if r["sensitive"] == sensitive and r.get("speed_R_per_T"))
+    for regime in ("inertial-implicit-coulomb", "overdamped-implicit-coulomb"):
+        with open(tmp_path / f"{regime}_prism-walker.csv") as f:
+            rows = list(csv.DictReader(f))
+        assert sorted(r["sensitive"] for r in rows) == ["false", "true"] and all(r["status"] == "done" for r in rows)
+        cell = result["regimes"][regime]["scenes"]["prism-walker"]
+        for key, sensitive in (("sensitive", "true"), ("insensitive", "false")):  # too short for a period: n = 0
+            assert cell[key]["n"] == sum(1 for r in rows if r["sensitive"] == sensitive and r.get("speed_R_per_T"))

@@ -348,12 +348,13 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     return rows
 
 
-def sweep_to_table(spec: SweepSpec, table: str, *, batch: int = 1, progress: bool = True) -> list:
-    """`sweep` of `spec` in a temporary folder (removed at the end), keeping only its table, copied to
-    `table`; returns the table's rows."""
+def sweep_to_table(spec: SweepSpec, table: str, *, batch: int = 1, progress: bool = True,
+                   executor: concurrent.futures.Executor | None = None) -> list:  # fmt: skip
+    """`sweep` of `spec` (on `executor`, as `sweep`) in a temporary folder (removed at the end), keeping only
+    its table, copied to `table`; returns the table's rows."""
     out = tempfile.mkdtemp(prefix=f"wavewarp-{spec.scene}-")
     try:
-        rows = sweep(spec, out, batch=batch, progress=progress)
+        rows = sweep(spec, out, batch=batch, progress=progress, executor=executor)
         shutil.copy(os.path.join(out, "table.csv"), table)
     finally:
         shutil.rmtree(out, ignore_errors=True)
