@@ -17,7 +17,6 @@ parameters (θ1, θ2) = (v, w): barycentric coordinates of the triangle's 2nd an
 from __future__ import annotations
 
 import functools
-
 import math
 
 import numpy as np
