@@ -184,21 +184,25 @@ def walker_dynamics(model, p, dt=None):
 
 
 def settled_walker_dynamics(model, p, settle_dt=None):
-    """`walker_dynamics(model, p)` with the walker put down: `p.settle` time units on the ground at c = 0,
-    with the step `settle_dt` (None: safety × the bound). An overdamped walker first settles as long with
-    the inertial mechanics (damping p.damping), then goes on overdamped from the positions reached:
-    overdamped alone, the sag's slowest mode relaxes over ζ / ω_min², and 40 time units at level 4 left
-    less than half the sag (0.56% of R against 1.29%); inertial alone, the body's bounce on the ground
-    rings on. Returns (dynamics, the step used while settling)."""
-    overdamped = p.mechanics == "overdamped"
-    dynamics = walker_dynamics(model, p, None if overdamped else settle_dt)
-    settling = walker_dynamics(model, replace(p, mechanics="inertial"), settle_dt) if overdamped else dynamics
+    """`walker_dynamics(model, p)` with the walker put down: `p.settle` time units on the ground at c = 0.
+    An overdamped walker first settles as long with the inertial mechanics (damping p.damping), then goes
+    on overdamped from the positions reached: overdamped alone, the sag's slowest mode relaxes over
+    ζ / ω_min², and 40 time units at level 4 left less than half the sag (0.56% of R against 1.29%);
+    inertial alone, the body's bounce on the ground rings on. `settle_dt`: the step while settling, or
+    for an overdamped walker the pair (inertial, overdamped); None: safety × each bound. Returns
+    (dynamics, the step or pair used, as `settle_dt` takes it)."""
+    if p.mechanics != "overdamped":
+        dynamics = walker_dynamics(model, p, settle_dt)
+        dynamics.run_until(p.settle)
+        return dynamics, dynamics.dt
+    inertial_dt, overdamped_dt = settle_dt if settle_dt is not None else (None, None)
+    settling = walker_dynamics(model, replace(p, mechanics="inertial"), inertial_dt)
     settling.run_until(p.settle)
-    if overdamped:
-        dynamics.state.set("x", settling.positions())
-        dynamics.time, dynamics.steps = settling.time, settling.steps
-        dynamics.run_until(2 * p.settle)
-    return dynamics, settling.dt
+    dynamics = walker_dynamics(model, p, overdamped_dt)
+    dynamics.state.set("x", settling.positions())
+    dynamics.time, dynamics.steps = settling.time, settling.steps
+    dynamics.run_until(2 * p.settle)
+    return dynamics, (settling.dt, dynamics.dt)
 
 
 def bound_over_reference_range(dynamics) -> float:
@@ -222,7 +226,8 @@ class WalkerRun(WaveClock):
     propagation, is +x (-x mirrored). The meshes are mirror-symmetric in x and y: the origin lies on
     the mirror plane y = 0 (no sideways walk) and mirroring it is exact. `bilayer`: the shell's
     active reference is the supplement's bilayer model. `mechanics_dt`, when given, is the mechanics' step
-    while the shell settles (default: safety × its bound; a batch's worlds share the strictest).
+    while the shell settles, a pair (inertial, overdamped) for an overdamped walker
+    (`settled_walker_dynamics`; default: safety × its bound; a batch's worlds share the strictest).
     """
 
     def __init__(self, name: str, mesh: Mesh, p, *, radius: float, size: float, origin, bilayer: bool = False,
