@@ -111,7 +111,7 @@ class WalkerBatch(WorldsRun):
         self.mesh = Mesh.union(self.world_meshes)
         self.model = walker_model(self.mesh, ps, placed[0].ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
-        # settle_dt: the step while settling (a single run given it settles alike)
+        # settle_dt: the step (overdamped: the pair of steps) while settling; a single run given it settles alike
         self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
         n = self.vertices = self.mesh.vertices_per_world
