@@ -250,8 +250,9 @@ def chart(result: dict, path: str) -> None:
                        label=f"{rows[0]['scene']} runs, {rows[0]['triangles_per_world']:,} triangles per world")  # fmt: skip
     left.set_xlabel("worlds N")
     left.set_ylabel("mechanics world-steps per second")
-    left.set_title(f"sphere walkers, {result['device_name']}")
-    left.legend(fontsize=7)
+    left.set_title(f"sphere walkers, {result['device_name']}" if walkers else "(no walker rows)")
+    if walkers:
+        left.legend(fontsize=7)
     right.axhline(10, color="grey", lw=0.8, ls=":")
     right.set_xlabel("worlds N")
     right.set_ylabel("batched / one after another")

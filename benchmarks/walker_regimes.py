@@ -4,14 +4,18 @@ prism and cube twins over seeds in each regime, against the paper's three claims
     wavewarp bench walker_regimes --device cuda --seeds 8 --periods 4 --out benchmarks/results/regimes
     wavewarp bench walker_regimes --tables benchmarks/results/regimes --device-name "NVIDIA H200"
 
-A regime is a mechanics, a contact solve and a friction law (`REGIMES`; `--regimes` picks some).
-Each regime × scene is one `wavewarp sweep` (sensitive × seeds, the seeds of one twin one batched
-run) whose table is kept as OUT/REGIME_SCENE.csv; `--tables DIR` reads such tables instead. Writes
+A regime is a mechanics, a contact solve and a friction law (`REGIMES`; `--regimes` and `--scenes`
+pick some, `--pairs REGIME:SCENE ...` exactly those). Each regime × scene is one `wavewarp sweep`
+(sensitive × seeds, the seeds of one twin one batched run) in OUT/sweeps/REGIME_SCENE, so that a
+killed scan run again computes only the seeds it lacks; its table is kept as OUT/REGIME_SCENE.csv.
+`--tables DIR` reads such tables instead. Writes
 OUT/walker_regimes.json — per regime, scene and twin: n, mean and standard deviation of
 speed_R_per_T (the forward displacement per pulse, in R), the share of seeds moving along the wave
-and the mean period; per regime and scene the twins' speed ratio (sensitive / insensitive, its
-spread from the two standard errors) and period ratio; and the paper's three claims checked — every
-twin moves along the wave, the sensitive sphere is faster (by more than two standard errors), the
+and the mean period; per regime and scene the twins' speed ratio (sensitive / insensitive, each seed's
+speed per unit time over the first pulses every seed of both twins has where the tables list the pulses,
+else the whole runs' per-pulse speeds; its spread from the two standard errors) and period ratio; and
+the paper's three claims checked on the same footing — every twin moves along the wave (every pulse,
+where the tables list them), the sensitive sphere is faster (by more than two standard errors), the
 sensitive prism is more than twice as fast as its twin (undecided, null, with one seed a twin) — and
 OUT/walker_regimes.png.
 """
@@ -24,6 +28,7 @@ import csv
 import glob
 import math
 import os
+import shutil
 import sys
 from datetime import date
 
@@ -38,7 +43,7 @@ from distributed import Client  # noqa: E402
 
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
-from wavewarp.sweep import SweepSpec, local_cluster, sweep_to_table  # noqa: E402
+from wavewarp.sweep import SweepSpec, local_cluster, sweep  # noqa: E402
 
 SCENES = ("sphere-walker", "prism-walker", "cube-walker")
 OVERDAMPED = ["mechanics=overdamped", "contact_solve=implicit"]
@@ -46,25 +51,28 @@ REGIMES = {
     "inertial-explicit-kf0.1": [],  # the scenes' defaults: friction a weak viscous drag
     "inertial-implicit-coulomb": ["contact_solve=implicit", "sharpness=inf"],
     # overdamped at the default drag ζ = 2 η_ground ≈ 61: ζ / (μ k_f g) from 1.2e4 (k_f = 0.1) to 0 (Coulomb)
-    **{f"overdamped-implicit-kf{k}": [*OVERDAMPED, f"sharpness={k}"] for k in ("0.1", "1", "10", "100", "1000")},
+    **{f"overdamped-implicit-kf{k}": [*OVERDAMPED, f"sharpness={k}"] for k in ("0.1", "1", "10", "100", "1000", "1e4")},
     "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],
     # less drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
     "overdamped-implicit-coulomb-drag20": [*OVERDAMPED, "sharpness=inf", "drag=20"],
     "overdamped-implicit-coulomb-drag6": [*OVERDAMPED, "sharpness=inf", "drag=6"],
-    # softer shells: the sphere sags 5.5% and 18% of R (1.3% at the default Y = 200)
+    # softer shells: the sphere sags about 3%, 5.5%, 8% and 18% of R (1.3% at the default Y = 200)
+    "overdamped-implicit-coulomb-young93": [*OVERDAMPED, "sharpness=inf", "young=93", "settle=100"],
     "overdamped-implicit-coulomb-young55": [*OVERDAMPED, "sharpness=inf", "young=55", "settle=100"],
+    "overdamped-implicit-coulomb-young34": [*OVERDAMPED, "sharpness=inf", "young=34", "settle=100"],
     "overdamped-implicit-coulomb-young12": [*OVERDAMPED, "sharpness=inf", "young=12", "settle=100"],
 }  # fmt: skip
 
 
 def run_regime(regime: str, scene: str, args, device: str, executor) -> None:
-    """The sweep of `scene`'s twins over the seeds in `regime` on `executor`, its table kept as
-    OUT/REGIME_SCENE.csv."""
+    """The sweep of `scene`'s twins over the seeds in `regime` on `executor` in OUT/sweeps/REGIME_SCENE (the
+    seeds done there are skipped), its table kept as OUT/REGIME_SCENE.csv."""
     fixed = (f"noise={args.noise}", f"periods={args.periods}", *REGIMES[regime], *args.set)
     spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
                      device=device)  # fmt: skip
-    sweep_to_table(spec, os.path.join(args.out, f"{regime}_{scene}.csv"), batch=args.seeds, progress=False,
-                   executor=executor)  # fmt: skip
+    folder = os.path.join(args.out, "sweeps", f"{regime}_{scene}")
+    sweep(spec, folder, batch=args.seeds, executor=executor, report=lambda line: print(f"{regime} {scene}: {line}"))
+    shutil.copy(os.path.join(folder, "table.csv"), os.path.join(args.out, f"{regime}_{scene}.csv"))
 
 
 def run_regimes(pairs: list, args, device: str) -> None:
@@ -77,11 +85,21 @@ def run_regimes(pairs: list, args, device: str) -> None:
             list(threads.map(lambda pair: run_regime(*pair, args, device, executor), pairs))  # raises a sweep's error
 
 
+def pulses(row: dict) -> list:
+    """A row's forward displacement per pulse, in R (columns pulse_displacements_R_1, _2, ...)."""
+    out = []
+    while row.get(f"pulse_displacements_R_{len(out) + 1}"):
+        out.append(float(row[f"pulse_displacements_R_{len(out) + 1}"]))
+    return out
+
+
 def twin(rows: list, sensitive: bool) -> dict:
-    """n, speeds, mean, sd, share moving forward, mean period and (tables that have them) the mean rolling
-    angle over the run, in degrees, and the mean settled sag / R of one twin's seeds."""
+    """n, speeds, mean, sd, share of seeds moving forward, mean period and (tables that have them) the
+    share of all pulses moving forward, the mean rolling angle over the run, in degrees, and the mean
+    settled sag / R of one twin's seeds."""
     chosen = [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
     speeds = [float(r["speed_R_per_T"]) for r in chosen]
+    every_pulse = [d for r in chosen for d in pulses(r)]
     n = len(speeds)
 
     def mean(key):
@@ -91,32 +109,60 @@ def twin(rows: list, sensitive: bool) -> dict:
     return {"n": n, "speeds": speeds, "mean": float(np.mean(speeds)) if n else None,
             "sd": float(np.std(speeds, ddof=1)) if n > 1 else 0.0,
             "forward_share": sum(s > 0 for s in speeds) / n if n else None,
-            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R")}  # fmt: skip
+            "pulse_forward_share": float(np.mean([d > 0 for d in every_pulse])) if every_pulse else None,
+            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R"),
+            "pulses": [pulses(r) for r in chosen], "seed_periods": [float(r["period"]) for r in chosen]}  # fmt: skip
+
+
+def compared(s: dict, i: dict) -> tuple:
+    """The twins' per-seed speeds on one footing, and its name. The sensitive twin's shorter period gives
+    it more whole pulses in the same run, and pulses differ (the first is often the largest): where the
+    tables list the pulses, each seed's speed is its mean over the first k pulses, k the fewest any seed
+    of either twin has, per unit time (÷ its period); else the whole runs' per-pulse speeds."""
+    k = min((len(p) for t in (s, i) for p in t["pulses"]), default=0)
+    if k == 0:
+        return s["speeds"], i["speeds"], "whole runs, per pulse"
+    def per_time(t):
+        return [float(np.mean(p[:k])) / period for p, period in zip(t["pulses"], t["seed_periods"])]
+    return per_time(s), per_time(i), f"first {k} pulse(s) of every seed, per unit time"
+
+
+def mean_and_error(values: list) -> tuple:
+    """Mean and standard error (0 for one value)."""
+    return float(np.mean(values)), float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
 def twins(rows: list) -> dict:
-    """Both twins, and the speed ratio sensitive / insensitive with its first-order spread."""
+    """Both twins, and the speed ratio sensitive / insensitive (on the footing of `compared`) with its
+    first-order spread, and the period ratio."""
     s, i = twin(rows, True), twin(rows, False)
-    cell = {"sensitive": s, "insensitive": i, "speed_ratio": None, "speed_ratio_spread": None, "period_ratio": None}
-    if s["n"] and i["n"] and s["mean"] != 0 and i["mean"] != 0:
-        ratio = s["mean"] / i["mean"]
-        relative = math.hypot(s["sd"] / math.sqrt(s["n"]) / s["mean"], i["sd"] / math.sqrt(i["n"]) / i["mean"])
-        cell.update(speed_ratio=ratio, speed_ratio_spread=abs(ratio) * relative, period_ratio=s["period"] / i["period"])
+    cell = {"sensitive": s, "insensitive": i, "compared": None, "speed_ratio": None, "speed_ratio_spread": None,
+            "period_ratio": None, "separation": None}  # fmt: skip
+    if s["n"] and i["n"]:
+        sensitive, insensitive, cell["compared"] = compared(s, i)
+        (ms, es), (mi, ei) = mean_and_error(sensitive), mean_and_error(insensitive)
+        cell.update(period_ratio=s["period"] / i["period"], separation=(ms - mi) / math.hypot(es, ei) if es or ei else None)
+        if ms != 0 and mi != 0:
+            ratio = ms / mi
+            cell.update(speed_ratio=ratio, speed_ratio_spread=abs(ratio) * math.hypot(es / ms, ei / mi))
+    for t in (s, i):
+        del t["pulses"], t["seed_periods"]
     return cell
 
 
 def claims(scenes: dict) -> dict:
     """The paper's claims for one regime (None where a scene is missing)."""
     def separated(cell):  # None with fewer than two seeds a twin: no spread to separate them by
-        s, i = cell["sensitive"], cell["insensitive"]
-        if min(s["n"], i["n"]) < 2:
+        if min(cell["sensitive"]["n"], cell["insensitive"]["n"]) < 2 or cell["separation"] is None:
             return None
-        error = math.hypot(s["sd"] / math.sqrt(s["n"]), i["sd"] / math.sqrt(i["n"]))
-        return s["mean"] - i["mean"] > 2 * error
+        return cell["separation"] > 2
 
     complete = [c for c in scenes.values() if c["sensitive"]["n"] and c["insensitive"]["n"]]
     sphere, prism = scenes.get("sphere-walker"), scenes.get("prism-walker")
-    return {"forward": all(c[t]["mean"] > 0 for c in complete for t in ("sensitive", "insensitive")) if complete else None,
+    def forward(t):  # every pulse where the table lists them, else the whole run
+        return t["mean"] > 0 if t["pulse_forward_share"] is None else t["pulse_forward_share"] == 1.0
+
+    return {"forward": all(forward(c[t]) for c in complete for t in ("sensitive", "insensitive")) if complete else None,
             "sensitive_sphere_faster": separated(sphere) if sphere and sphere["sensitive"]["n"] else None,
             "prism_ratio_above_2": (prism["sensitive"]["mean"] > 0 and prism["speed_ratio"] is not None
                                     and prism["speed_ratio"] > 2) if prism and prism["sensitive"]["n"] else None}  # fmt: skip
@@ -176,6 +222,8 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default=None)
     parser.add_argument("--regimes", nargs="+", choices=tuple(REGIMES), default=list(REGIMES))
     parser.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
+    parser.add_argument("--pairs", nargs="+", default=None, metavar="REGIME:SCENE",
+                        help="run exactly these (regime, scene) sweeps instead of --regimes × --scenes")
     parser.add_argument("--seeds", type=int, default=8, help="rest shapes per twin (one batched run)")
     parser.add_argument("--noise", type=float, default=1e-3, help="rest-shape noise / R (seeded)")
     parser.add_argument("--periods", type=float, default=4.0)
@@ -193,7 +241,15 @@ def main(argv=None) -> int:
         described = {"device_name": args.device_name}
     else:
         device = resolve_device(args.device)
-        run_regimes([(r, s) for r in args.regimes for s in args.scenes], args, "cuda" if device.is_cuda else "cpu")
+        pairs = [(r, s) for r in args.regimes for s in args.scenes]
+        if args.pairs:
+            pairs = [tuple(pair.rsplit(":", 1)) for pair in args.pairs]
+            unknown = [":".join(p) for p in pairs if len(p) != 2 or p[0] not in REGIMES or p[1] not in SCENES]
+            if unknown:
+                parser.error(f"--pairs: {', '.join(unknown)} is not REGIME:SCENE (regimes: {', '.join(REGIMES)}; "
+                             f"scenes: {', '.join(SCENES)})")  # fmt: skip
+            args.regimes, args.scenes = list(dict.fromkeys(p[0] for p in pairs)), list(dict.fromkeys(p[1] for p in pairs))
+        run_regimes(pairs, args, "cuda" if device.is_cuda else "cpu")
         described = describe_device(device)
     tables = read_tables(args.tables or args.out, args.regimes, args.scenes)
     if not tables:

@@ -71,6 +71,48 @@ def test_one_seed_a_twin_leaves_the_sphere_claim_undecided(tmp_path):
     assert claims == {"forward": True, "sensitive_sphere_faster": None, "prism_ratio_above_2": None}
 
 
+def test_twins_are_compared_per_unit_time_over_the_pulses_every_seed_has(tmp_path):
+    """The sensitive twin's shorter period gives it a third pulse, here a large one: over whole runs it
+    looks faster per pulse, over the two pulses both twins have and per unit time it is slower."""
+    sensitive = {0: [1.0e-3, 4.0e-4, 1.5e-3], 1: [1.1e-3, 4.4e-4, 1.6e-3], 2: [0.9e-3, 4.2e-4, 1.4e-3]}
+    insensitive = {0: [1.1e-3, 5.0e-4], 1: [1.2e-3, 5.2e-4], 2: [1.0e-3, 4.8e-4]}
+    periods = {True: 268.0, False: 278.0}
+    with open(tmp_path / "overdamped-implicit-kf100_sphere-walker.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "period", "speed_R_per_T",
+                                               *(f"pulse_displacements_R_{k}" for k in (1, 2, 3))])  # fmt: skip
+        writer.writeheader()
+        for flag, twin in ((True, sensitive), (False, insensitive)):
+            for seed, pulses in twin.items():
+                writer.writerow({"point": f"s{flag}{seed}", "sensitive": str(flag).lower(), "seed": seed,
+                                 "status": "done", "period": periods[flag] + seed, "speed_R_per_T": np.mean(pulses),
+                                 **{f"pulse_displacements_R_{k}": v for k, v in enumerate(pulses, 1)}})  # fmt: skip
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    result = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-kf100"]
+    cell = result["scenes"]["sphere-walker"]
+    s = np.array([np.mean(p[:2]) / (periods[True] + seed) for seed, p in sensitive.items()])
+    i = np.array([np.mean(p[:2]) / (periods[False] + seed) for seed, p in insensitive.items()])
+    assert cell["compared"] == "first 2 pulse(s) of every seed, per unit time"
+    assert cell["speed_ratio"] == pytest.approx(s.mean() / i.mean(), rel=1e-12)
+    error = math.hypot(s.std(ddof=1), i.std(ddof=1)) / math.sqrt(3)
+    assert cell["separation"] == pytest.approx((s.mean() - i.mean()) / error, rel=1e-12)
+    assert cell["sensitive"]["mean"] > cell["insensitive"]["mean"]  # whole runs, per pulse
+    assert result["claims"]["sensitive_sphere_faster"] is False
+    assert cell["sensitive"]["pulse_forward_share"] == 1.0 and result["claims"]["forward"] is True
+
+
+def test_one_backward_pulse_fails_the_forward_claim(tmp_path):
+    """Claim 1 is about every pulse: a run whose mean is forward but whose first pulse went back fails it."""
+    with open(tmp_path / "overdamped-implicit-coulomb_prism-walker.csv", "w", newline="") as f:
+        f.write("point,sensitive,seed,status,period,speed_R_per_T,pulse_displacements_R_1,pulse_displacements_R_2\n"
+                "a,true,0,done,268,0.0002,-0.0001,0.0005\na,true,1,done,268,0.0003,0.0001,0.0005\n"
+                "b,false,0,done,278,0.0002,0.0002,0.0002\nb,false,1,done,278,0.0001,0.0001,0.0001\n")
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    result = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb"]
+    assert result["scenes"]["prism-walker"]["sensitive"]["pulse_forward_share"] == 0.75
+    assert result["scenes"]["prism-walker"]["sensitive"]["forward_share"] == 1.0
+    assert result["claims"]["forward"] is False
+
+
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
     with pytest.raises(SystemExit):
         cli(["bench", "walker_regimes", "--tables", str(tmp_path)])
@@ -79,12 +121,20 @@ def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
 
 
 @pytest.mark.slow
-def test_walker_regimes_runs_its_sweeps_and_keeps_their_tables(tmp_path):
-    """Two regimes' sweeps side by side on one local cluster: each keeps its own table, and the summary
-    counts each table's seeds."""
-    assert cli(["bench", "walker_regimes", "--quick", "--device", "cpu", "--seeds", "1", "--regimes",
-                "overdamped-implicit-coulomb", "inertial-implicit-coulomb", "--scenes", "prism-walker", "--periods",
-                "0.05", "--set", "settle=1", "--out", str(tmp_path)]) == 0  # fmt: skip
+def test_walker_regimes_runs_its_sweeps_and_keeps_their_tables(tmp_path, capsys):
+    """Two regimes' sweeps side by side on one local cluster: each keeps its own table, the summary
+    counts each table's seeds, and the scan run again (one regime lost its results) computes only those."""
+    command = ["bench", "walker_regimes", "--quick", "--device", "cpu", "--seeds", "1", "--pairs",
+               "overdamped-implicit-coulomb:prism-walker", "inertial-implicit-coulomb:prism-walker", "--periods",
+               "0.05", "--set", "settle=1", "--out", str(tmp_path)]  # fmt: skip
+    assert cli(command) == 0
+    for result in (tmp_path / "sweeps" / "inertial-implicit-coulomb_prism-walker").glob("**/sensitive=*.json"):
+        result.unlink()
+    capsys.readouterr()
+    assert cli(command) == 0
+    printed = capsys.readouterr().out
+    assert "overdamped-implicit-coulomb prism-walker: 2 of 2 points already done; running 0" in printed
+    assert "inertial-implicit-coulomb prism-walker: 0 of 2 points already done; running 2" in printed
     result = json.loads((tmp_path / "walker_regimes.json").read_text())
     for regime in ("inertial-implicit-coulomb", "overdamped-implicit-coulomb"):
         with open(tmp_path / f"{regime}_prism-walker.csv") as f:

@@ -22,7 +22,8 @@ from wavewarp import cli, kernels, walker
 from wavewarp.device import set_deterministic
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import SceneError, load_scene, resolve
-from wavewarp.sweep import Point, SweepSpec, batches, grid_points, merge_kernel_cache, parse_grid, sweep
+from wavewarp.sweep import (LISTED_COLUMNS, Point, SweepSpec, batches, grid_points, measurement_columns, merge_kernel_cache,
+                            parse_grid, sweep)
 
 QUICK_CUBE = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True, device="cpu")
 
@@ -236,6 +237,12 @@ def test_sweeps_reuse_a_running_cluster_and_it_stops_on_sigterm(tmp_path):
         cluster.send_signal(signal.SIGTERM)
         out, _ = cluster.communicate(timeout=60)
     assert cluster.returncode == 0 and "stopped" in out
+
+
+def test_short_lists_of_numbers_get_a_column_per_entry():
+    columns = measurement_columns({"speed": 0.5, "pulses": [0.1, -0.2], "flag": True, "label": "x",
+                                   "long": list(range(LISTED_COLUMNS + 1)), "mixed": [1.0, "a"]})  # fmt: skip
+    assert columns == {"speed": 0.5, "pulses_1": 0.1, "pulses_2": -0.2, "flag": True}
 
 
 def test_walker_seeds_perturb_the_rest_shape(monkeypatch):

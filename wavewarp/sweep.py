@@ -299,8 +299,24 @@ def _executor(executor, spec: SweepSpec, workers, scheduler, report):
         yield client.get_executor()
 
 
+LISTED_COLUMNS = 32  # a measurement that is a list of at most this many numbers gets a column per entry
+
+
+def measurement_columns(measurements: dict) -> dict:
+    """The numeric measurements, each short list of numbers (`pulse_displacements_R`: one per pulse) as
+    columns NAME_1, NAME_2, ..."""
+    columns = {}
+    for name, value in measurements.items():
+        if isinstance(value, (int, float)):
+            columns[name] = value
+        elif isinstance(value, list) and len(value) <= LISTED_COLUMNS and all(isinstance(v, (int, float)) for v in value):
+            columns.update({f"{name}_{k}": v for k, v in enumerate(value, 1)})
+    return columns
+
+
 def table_rows(out: str, points) -> list:
-    """One row per point with a result: its grid values, seed, status and numeric measurements."""
+    """One row per point with a result: its grid values, seed, status and numeric measurements (short
+    lists of numbers a column per entry)."""
     rows = []
     for point in points:
         path = result_path(out, point)
@@ -310,7 +326,7 @@ def table_rows(out: str, points) -> list:
             result = json.load(f)
         row = {"point": point.name, **result["values"], "seed": result["seed"], "status": result["status"],
                "frames": result.get("frames", 0), "steps": result.get("steps", 0), "wall_time_s": result["wall_time_s"], "device": result.get("device", "")}  # fmt: skip
-        row.update({k: v for k, v in result.get("measurements", {}).items() if isinstance(v, (int, float))})
+        row.update(measurement_columns(result.get("measurements", {})))
         rows.append(row)
     return rows
 
