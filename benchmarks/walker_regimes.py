@@ -5,7 +5,7 @@ prism and cube twins over seeds in each regime, against the paper's three claims
     wavewarp bench walker_regimes --tables benchmarks/results/regimes --device-name "NVIDIA H200"
 
 A regime is a mechanics, a contact solve and a friction law (`REGIMES`; `--regimes` and `--scenes`
-pick some, `--pairs REGIME:SCENE ...` exactly those). Each regime × scene is one `wavewarp sweep`
+pick some, `--pairs REGIME:SCENE ...` exactly those, started in that order). Each regime × scene is one `wavewarp sweep`
 (sensitive × seeds, the seeds of one twin one batched run) in OUT/sweeps/REGIME_SCENE, so that a
 killed scan run again computes only the seeds it lacks; its table is kept as OUT/REGIME_SCENE.csv.
 `--tables DIR` reads such tables instead. Writes
@@ -56,6 +56,9 @@ REGIMES = {
     # less drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
     "overdamped-implicit-coulomb-drag20": [*OVERDAMPED, "sharpness=inf", "drag=20"],
     "overdamped-implicit-coulomb-drag6": [*OVERDAMPED, "sharpness=inf", "drag=6"],
+    # the drag on the deformation only: the translation is the friction's alone (ζ → 0 for the body's motion)
+    "overdamped-implicit-coulomb-body": [*OVERDAMPED, "sharpness=inf", "drag_frame=body"],
+    "overdamped-implicit-coulomb-body-drag20": [*OVERDAMPED, "sharpness=inf", "drag_frame=body", "drag=20"],
     # softer shells: the sphere sags about 3%, 5.5%, 8% and 18% of R (1.3% at the default Y = 200)
     "overdamped-implicit-coulomb-young93": [*OVERDAMPED, "sharpness=inf", "young=93", "settle=100"],
     "overdamped-implicit-coulomb-young55": [*OVERDAMPED, "sharpness=inf", "young=55", "settle=100"],
@@ -77,12 +80,13 @@ def run_regime(regime: str, scene: str, args, device: str, executor) -> None:
 
 def run_regimes(pairs: list, args, device: str) -> None:
     """Every (regime, scene) sweep at once on one local Dask cluster (one worker per GPU, or per core):
-    a sweep has only two batches (the twins), so sweeps one after another would leave GPUs idle."""
+    a sweep has only two batches (the twins), so sweeps one after another would leave GPUs idle. The
+    batches start in the order of `pairs` (Dask priorities): put the costliest first."""
     with local_cluster(device) as cluster, Client(cluster) as client:
-        executor = client.get_executor()
         print(f"Dask: {len(client.scheduler_info()['workers'])} workers; dashboard {client.dashboard_link}")
+        executors = [client.get_executor(priority=len(pairs) - k) for k in range(len(pairs))]
         with concurrent.futures.ThreadPoolExecutor(len(pairs)) as threads:
-            list(threads.map(lambda pair: run_regime(*pair, args, device, executor), pairs))  # raises a sweep's error
+            list(threads.map(lambda pair, executor: run_regime(*pair, args, device, executor), pairs, executors))  # raises a sweep's error
 
 
 def pulses(row: dict) -> list:

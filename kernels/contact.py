@@ -13,12 +13,14 @@ consistent with its own end-of-step velocity u⁺ = u* + r f (u* without contact
 response: the row sum of L M⁻¹ Lᵀ over the points in contact, times dt, or 1/ζ overdamped).
 """
 
+from dataclasses import dataclass
 from typing import Any
 
 import warp as wp
 
 from . import declare_overloads, scalar_of
 from .limit_surface import basis_row, limit_motion_kernel, patch_scalar
+from .reduce import REDUCTION_BLOCK, block_add
 
 
 @wp.kernel
@@ -208,35 +210,118 @@ def slip_speed(speed: Any, a: Any, k_f: Any):
     return wp.min(s, speed)
 
 
+@wp.func
+def implicit_normal_force(z: Any, u_z: Any, r: Any, dt: Any, k: Any, beta: Any):
+    """F_n = max(k z² - β' u⁺_z, 0) with u⁺_z = u*_z + r F_n and β' = β + 2k|z| dt (the penalty linearised at
+    z + dt u⁺_z): F_n = max((k z² - β' u*_z) / (1 + β' r), 0) where z ≤ 0, else 0."""
+    zero = type(z)(0.0)
+    damping = beta - type(z)(2.0) * k * z * dt
+    fn = (k * z * z - damping * u_z) / (type(z)(1.0) + damping * r)
+    if z > zero or fn < zero:  # above ground, or pulling down: no contact force
+        fn = zero
+    return fn
+
+
+@wp.func
+def friction_magnitude(speed: Any, r: Any, cap: Any, k_f: Any):
+    """|f_t| of a point whose tangential velocity without friction is `speed` (response r, cap μ F_n):
+    μ F_n tanh(k_f s) with s its end-of-step slip speed; Coulomb (k_f = ∞): min(μ F_n, speed / r)."""
+    if wp.isinf(k_f):
+        return wp.min(cap, speed / r)
+    return cap * wp.tanh(k_f * slip_speed(speed, r * cap, k_f))
+
+
+@wp.func
+def friction_slope_at_rest(r: Any, cap: Any, k_f: Any):
+    """d|f_t| / d speed of `friction_magnitude` at speed 0: 1/r for Coulomb's law (a sticking point), and
+    μ F_n k_f / (1 + r μ F_n k_f) for the tanh law."""
+    if wp.isinf(k_f):
+        return type(r)(1.0) / r
+    return cap * k_f / (type(r)(1.0) + r * cap * k_f)
+
+
 @wp.kernel
 def implicit_contact_kernel(
     p: wp.array(dtype=Any), u: wp.array(dtype=Any), response: wp.array(dtype=Any), scale: Any, dt: Any, k: Any,
-    beta: Any, mu: Any, k_f: Any, normal_force: wp.array(dtype=Any), limit_forces: wp.array(dtype=Any),
+    beta: Any, mu: Any, k_f: Any, body: wp.array(dtype=Any), normal_force: wp.array(dtype=Any),
+    limit_forces: wp.array(dtype=Any),
 ):  # fmt: skip
-    """Point i's force f with its end-of-step velocity u⁺ = u* + r f, r = scale × response_i (docs/theory/dynamics.md):
-    F_n = max(k z² - β' u⁺_z, 0) with β' = β + 2k|z| dt (the penalty linearised at z + dt u⁺_z), i.e.
-    F_n = max((k z² - β' u*_z) / (1 + β' r), 0) where z ≤ 0; friction -μ F_n tanh(k_f s) along u*_t, s = |u⁺_t| the
-    slip speed (`slip_speed`; Coulomb for k_f = ∞: the point sticks while |u*_t| ≤ r μ F_n)."""
+    """Point i's force f with its end-of-step velocity u⁺ = u* + U + r f, r = scale × response_i and U its world's
+    horizontal body velocity (`body`, one per world; zero with the drag in the lab frame;
+    docs/theory/dynamics.md): the normal force of `implicit_normal_force`; friction -μ F_n tanh(k_f s) along
+    u*_t + U, s = |u⁺_t| the slip speed (`slip_speed`; Coulomb for k_f = ∞: the point sticks while
+    |u*_t + U| ≤ r μ F_n)."""
     i = wp.tid()
     z = p[i][2]
     zero = type(z)(0.0)
     r = scale * response[i]
-    damping = beta - type(z)(2.0) * k * z * dt
-    fn = (k * z * z - damping * u[i][2]) / (type(z)(1.0) + damping * r)
-    if z > zero or fn < zero:  # above ground, or pulling down: no contact force
-        fn = zero
+    fn = implicit_normal_force(z, u[i][2], r, dt, k, beta)
     normal_force[i] = fn
     f = type(p[i])(zero, zero, fn)
-    v_t = type(u[i])(u[i][0], u[i][1], zero)
+    shift = body[i // (p.shape[0] // body.shape[0])]
+    v_t = type(u[i])(u[i][0] + shift[0], u[i][1] + shift[1], zero)
     speed = wp.length(v_t)
     if speed > zero and fn > zero:
-        cap = mu * fn
-        s = slip_speed(speed, r * cap, k_f)
-        magnitude = cap * wp.tanh(k_f * s)
-        if wp.isinf(k_f):
-            magnitude = wp.min(cap, speed / r)
-        f = f - (magnitude / speed) * v_t
+        f = f - (friction_magnitude(speed, r, mu * fn, k_f) / speed) * v_t
     limit_forces[i] = f
+
+
+@wp.kernel
+def body_friction_sums_kernel(
+    p: wp.array(dtype=Any), u: wp.array(dtype=Any), response: wp.array(dtype=Any), weight: wp.array(dtype=Any),
+    scale: Any, dt: Any, k: Any, beta: Any, mu: Any, k_f: Any, body: wp.array(dtype=Any), threads: int,
+    force_sum: wp.array(dtype=Any), stiffness_sum: wp.array(dtype=Any),
+):  # fmt: skip
+    """Per world w (`threads` per world, thread t taking its points t, t + threads, ...): the net friction
+    force_sum[w] += Σ_q a_q f_t,q of `implicit_contact_kernel`'s law at body velocity U_w, and
+    stiffness_sum[w] += Σ_q a_q |f_t,q| / |y_q| (y_q = u*_q + U_w its slip velocity without friction; the
+    law's slope at y = 0), the isotropic majorant of -∂(Σ a f_t)/∂U. a_q: the point's weight (1, or dω̄⁰
+    for pressures)."""
+    worlds = body.shape[0]
+    points = p.shape[0] // worlds
+    w = wp.tid() // threads
+    zero = type(dt)(0.0)
+    force = type(p[0])()
+    stiffness = zero
+    for q in range(w * points + wp.tid() - w * threads, (w + 1) * points, threads):
+        r = scale * response[q]
+        fn = implicit_normal_force(p[q][2], u[q][2], r, dt, k, beta)
+        if fn > zero:
+            y = type(p[0])(u[q][0] + body[w][0], u[q][1] + body[w][1], zero)
+            speed = wp.length(y)
+            if speed > zero:
+                m = friction_magnitude(speed, r, mu * fn, k_f)
+                force -= (weight[q] * m / speed) * y
+                stiffness += weight[q] * m / speed
+            else:
+                stiffness += weight[q] * friction_slope_at_rest(r, mu * fn, k_f)
+    block_add(force_sum, w, force)
+    block_add(stiffness_sum, w, stiffness)
+
+
+@wp.kernel
+def body_velocity_kernel(
+    force_sum: wp.array(dtype=Any), stiffness_sum: wp.array(dtype=Any), external: wp.array(dtype=Any),
+    body: wp.array(dtype=Any),
+):  # fmt: skip
+    """One step per world w towards G(U) = Σ_q a_q f_t,q(U) + external_w = 0 (the world's net horizontal force):
+    U_w += G / Σ_q a_q |f_t,q| / |y_q|, a Weiszfeld (iteratively reweighted) step, which lowers the friction's
+    dissipation potential every time for a law whose |f_t| / |y| falls with |y| (Coulomb, tanh); then zeroes
+    the sums for the next pass."""
+    w = wp.tid()
+    g = force_sum[w] + external[w]
+    h = stiffness_sum[w]
+    if h > type(h)(0.0):
+        body[w] = body[w] + g / h
+    force_sum[w] = type(g)()
+    stiffness_sum[w] = type(h)(0.0)
+
+
+@wp.kernel
+def add_body_velocity_kernel(body: wp.array(dtype=Any), v: wp.array(dtype=Any)):
+    """v_I += U_w: each control point of world w takes its world's body velocity."""
+    i = wp.tid()
+    v[i] = v[i] + body[i // (v.shape[0] // body.shape[0])]
 
 
 @wp.kernel
@@ -268,7 +353,13 @@ declare_overloads(limit_coupled_velocity_kernel, load="vec3[]", inverse_mass="sc
 declare_overloads(quadrature_coupled_velocity_kernel, load="vec3[]", inverse_mass="scalar[]", scale="scalar",
                   basis="vec6[,]", predictor="vec3[]", response="scalar[]", limit_forces="vec3[]", others="vec3[]")  # fmt: skip
 declare_overloads(implicit_contact_kernel, p="vec3[]", u="vec3[]", response="scalar[]", scale="scalar", dt="scalar",
-                  k="scalar", beta="scalar", mu="scalar", k_f="scalar", normal_force="scalar[]", limit_forces="vec3[]")  # fmt: skip
+                  k="scalar", beta="scalar", mu="scalar", k_f="scalar", body="vec3[]", normal_force="scalar[]",
+                  limit_forces="vec3[]")  # fmt: skip
+declare_overloads(body_friction_sums_kernel, p="vec3[]", u="vec3[]", response="scalar[]", weight="scalar[]",
+                  scale="scalar", dt="scalar", k="scalar", beta="scalar", mu="scalar", k_f="scalar", body="vec3[]",
+                  force_sum="vec3[]", stiffness_sum="scalar[]")  # fmt: skip
+declare_overloads(body_velocity_kernel, force_sum="vec3[]", stiffness_sum="scalar[]", external="vec3[]", body="vec3[]")
+declare_overloads(add_body_velocity_kernel, body="vec3[]", v="vec3[]")
 declare_overloads(contact_velocity_kernel, contact="vec3[]", inverse_mass="scalar[]", scale="scalar", dt="scalar",
                   x="vec3[]", v="vec3[]")  # fmt: skip
 
@@ -315,13 +406,46 @@ def eval_ground(ground, x: wp.array, v: wp.array, mask, patch: list, rest_area, 
     spread_to_control_points(ground, point_forces, mask, patch, rest_area, forces)
 
 
+@dataclass
+class BodyFrame:
+    """Where the overdamped drag acts: one horizontal body velocity U per world (`velocity`). In the lab frame
+    (`solve` False) U stays 0. In the body frame each implicit contact pass first solves U by `iterations`
+    Weiszfeld steps (first pass, then each sweep) so that the world's net horizontal force — the friction
+    (points weighted by `weight`) plus `external` — vanishes; every control point then moves with U on top.
+    `force_sum`, `stiffness_sum`: per-world scratch; `threads` per world for their sums."""
+
+    velocity: wp.array
+    solve: bool = False
+    external: wp.array | None = None
+    weight: wp.array | None = None
+    force_sum: wp.array | None = None
+    stiffness_sum: wp.array | None = None
+    threads: int = 0
+    iterations: tuple = (2, 1)
+
+
+def solve_body_velocity(body: BodyFrame, ground, points: wp.array, u: wp.array, response: wp.array, scale: float,
+                        dt: float, iterations: int) -> None:  # fmt: skip
+    """`iterations` Weiszfeld steps of each world's body velocity U on its net horizontal force (`body_friction_sums_kernel`,
+    `body_velocity_kernel`), the points' velocities without friction `u` (plus U)."""
+    s, device, worlds = scalar_of(response), points.device, len(body.velocity)
+    laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
+    for _ in range(iterations):
+        wp.launch(body_friction_sums_kernel, dim=worlds * body.threads,
+                  inputs=[points, u, response, body.weight, *laws, body.velocity, body.threads],
+                  outputs=[body.force_sum, body.stiffness_sum], device=device, block_dim=REDUCTION_BLOCK)  # fmt: skip
+        wp.launch(body_velocity_kernel, dim=worlds, inputs=[body.force_sum, body.stiffness_sum, body.external],
+                  outputs=[body.velocity], device=device)  # fmt: skip
+
+
 def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.array, scale: float, dt: float, mask,
                          patch: list, rest_area, points: wp.array, velocities: wp.array, response: wp.array,
-                         others: wp.array, normal_force: wp.array, point_forces: wp.array, load: wp.array) -> None:  # fmt: skip
+                         others: wp.array, normal_force: wp.array, point_forces: wp.array, load: wp.array,
+                         body: BodyFrame) -> None:  # fmt: skip
     """The implicit contact step: v holds the velocities without contact (u* = L v on the ground's
     points); each point's force is solved against its own response (`implicit_contact_kernel`), then
     refined by `ground.sweeps` Jacobi sweeps in which each point sees the others' forces, then
-    v += scale M⁻¹ Lᵀ f and x += dt v. `response`, `others` and `load` are scratch."""
+    v += scale M⁻¹ Lᵀ f (+ U, `body`) and x += dt v. `response`, `others` and `load` are scratch."""
     n, s, device = len(points), scalar_of(normal_force), x.device
     point = ground.contact == "point"
     tables = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight] if point else list(patch)
@@ -332,7 +456,10 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
     wp.launch(limit_response_kernel if point else quadrature_response_kernel, dim=n, inputs=[load, inverse_mass, *tables],
               outputs=[response], device=device)  # fmt: skip
     laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
-    wp.launch(implicit_contact_kernel, dim=n, inputs=[points, velocities, response, *laws],
+    if body.solve:
+        body.velocity.zero_()
+        solve_body_velocity(body, ground, points, velocities, response, scale, dt, body.iterations[0])
+    wp.launch(implicit_contact_kernel, dim=n, inputs=[points, velocities, response, *laws, body.velocity],
               outputs=[normal_force, point_forces], device=device)  # fmt: skip
     coupled = limit_coupled_velocity_kernel if point else quadrature_coupled_velocity_kernel
     for _ in range(ground.sweeps):
@@ -340,9 +467,13 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
         spread_to_control_points(ground, point_forces, mask, patch, rest_area, load)
         wp.launch(coupled, dim=n, inputs=[load, inverse_mass, s(scale), *tables, velocities, response, point_forces],
                   outputs=[others], device=device)  # fmt: skip
-        wp.launch(implicit_contact_kernel, dim=n, inputs=[points, others, response, *laws],
+        if body.solve:
+            solve_body_velocity(body, ground, points, others, response, scale, dt, body.iterations[1])
+        wp.launch(implicit_contact_kernel, dim=n, inputs=[points, others, response, *laws, body.velocity],
                   outputs=[normal_force, point_forces], device=device)  # fmt: skip
     load.zero_()
     spread_to_control_points(ground, point_forces, mask, patch, rest_area, load)
+    if body.solve:
+        wp.launch(add_body_velocity_kernel, dim=len(v), inputs=[body.velocity], outputs=[v], device=device)
     wp.launch(contact_velocity_kernel, dim=len(x), inputs=[load, inverse_mass, s(scale), s(dt)], outputs=[x, v],
               device=device)  # fmt: skip

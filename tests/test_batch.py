@@ -94,12 +94,18 @@ def quick_worlds():
     return [replace(base, AC=0.1), replace(base, AC=0.2, mirror=True, mu_v=0.0, young=250.0, thickness=2.5)]
 
 
-@pytest.mark.parametrize("mechanics", ["inertial", pytest.param("overdamped", marks=pytest.mark.slow)])
+OVERDAMPED_BODY = {"mechanics": "overdamped", "contact_solve": "implicit", "drag_frame": "body"}
+
+
+@pytest.mark.parametrize("mechanics", [{"mechanics": "inertial"},
+                                       pytest.param({"mechanics": "overdamped"}, marks=pytest.mark.slow),
+                                       pytest.param(OVERDAMPED_BODY, marks=pytest.mark.slow)])  # fmt: skip
 def test_each_world_of_a_walker_batch_equals_its_single_run_bit_for_bit(deterministic, device, mechanics):
     """Two sphere walkers differing in AC, Y, h, μV, the wave's side and the noise seed: the batch's
     positions, concentrations, trace and measurements of each world are those of its own WalkerRun
-    (which settles with the batch's mechanics steps: the worlds share the strictest)."""
-    ps, seeds = [replace(p, mechanics=mechanics, drag=6.0) for p in quick_worlds()], [0, 1]  # one drag: it is shared
+    (which settles with the batch's mechanics steps: the worlds share the strictest). With the drag in
+    the body frame each world solves its own body velocity."""
+    ps, seeds = [replace(p, drag=6.0, **mechanics) for p in quick_worlds()], [0, 1]  # one drag: it is shared
     batch = scene.build_batch(ps, seeds=seeds, device=device, report=lambda message: None)
     results = batch.run()
     x, c, n = batch.dynamics.positions(), batch.wave.concentration(), batch.vertices

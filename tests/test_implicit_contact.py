@@ -18,19 +18,21 @@ G, MU = 10.0, 0.5
 
 
 def block_on_slope(tan_theta, *, sharpness=math.inf, solve="implicit", contact="point", young=1e6, drag=None,
-                   sweeps=8, settle=2.0):  # fmt: skip
-    """A 1 × 1 × 0.4 box (wide: it neither tips nor rocks) put down on a slope tan θ, run for `settle`."""
+                   sweeps=8, settle=2.0, drag_frame="lab", x0=None):  # fmt: skip
+    """A 1 × 1 × 0.4 box (wide: it neither tips nor rocks) put down on a slope tan θ (or started at `x0`), run
+    for `settle`."""
     box = cube(1.0, 4)
     mesh = Mesh(box.vertices * [1.0, 1.0, 0.4], box.triangles)
     shell = Shell(mesh, thickness=0.1, young=young, device="cpu", dtype="float64")
     stiffness, damping = (1e4, 20.0) if contact == "point" else (1e4 * 25 / 2.8, 20.0 * 25 / 2.8)
     ground = Ground(stiffness=stiffness, damping=damping, friction=MU, sharpness=sharpness, solve=solve,
                     contact=contact, sweeps=sweeps, slope=math.atan(tan_theta))  # fmt: skip
-    x0 = mesh.vertices + [0.0, 0.0, -limit_positions(mesh, device="cpu", dtype="float64")[:, 2].min()]
+    if x0 is None:
+        x0 = mesh.vertices + [0.0, 0.0, -limit_positions(mesh, device="cpu", dtype="float64")[:, 2].min()]
     if drag is None:
         run = ShellDynamics(shell, density=1.0, gravity=G, ground=ground, damping=5.0, x0=x0)
     else:
-        run = OverdampedDynamics(shell, density=1.0, gravity=G, ground=ground, drag=drag, x0=x0)
+        run = OverdampedDynamics(shell, density=1.0, gravity=G, ground=ground, drag=drag, x0=x0, drag_frame=drag_frame)
     run.run_until(settle)
     return run
 
@@ -117,6 +119,41 @@ def test_overdamped_block_follows_the_regularised_friction_balance():
     balance = brentq(lambda v: v + MU * G * math.cos(theta) / drag * math.tanh(k_f * v) - G * math.sin(theta) / drag,
                      0.0, 10.0)  # fmt: skip
     assert along_slope_velocity(run) == pytest.approx(balance, rel=1e-3)
+
+
+def held_on_slope(tan_theta):
+    """The block settled (inertial, Coulomb: it sticks) on the slope, its normal forces balancing g cos θ."""
+    return block_on_slope(tan_theta, young=1e3, settle=3.0, sweeps=32)
+
+
+@pytest.mark.parametrize("drag", [5.0, pytest.param(61.0, marks=pytest.mark.slow)])
+def test_body_frame_drag_leaves_the_slide_to_the_friction_balance_at_any_drag(drag):
+    """Drag in the body frame brakes no translation: the block slides where μ N tanh(k_f v) = M g sin θ,
+    v = atanh(tan θ / μ) / k_f, as with inertia and whatever ζ; in the lab frame the drag takes its share
+    (v + (μ g cos θ / ζ) tanh(k_f v) = g sin θ / ζ)."""
+    k_f, theta = 2.0, math.atan(0.3)
+    x0 = held_on_slope(0.3).positions()
+    body = block_on_slope(0.3, sharpness=k_f, young=1e3, drag=drag, settle=1.0, sweeps=32, drag_frame="body", x0=x0)
+    assert along_slope_velocity(body) == pytest.approx(math.atanh(0.3 / MU) / k_f, rel=5e-3)
+    assert body.solver.body.velocity.numpy()[0, 0] == pytest.approx(along_slope_velocity(body), rel=1e-6)
+    lab = brentq(lambda v: v + MU * G * math.cos(theta) / drag * math.tanh(k_f * v) - G * math.sin(theta) / drag, 0.0, 10.0)
+    assert lab < 0.7 * along_slope_velocity(body)
+
+
+def test_body_frame_coulomb_block_sticks_below_the_static_threshold():
+    """tan θ = 0.3 < μ: nothing but Coulomb friction holds the block, and it holds (below 1e-3 of the k_f = 2 slide)."""
+    x0 = held_on_slope(0.3).positions()
+    body = block_on_slope(0.3, young=1e3, drag=5.0, settle=1.0, sweeps=32, drag_frame="body", x0=x0)
+    assert abs(along_slope_velocity(body)) < 1e-3 * math.atanh(0.3 / MU) / 2.0
+
+
+def test_body_frame_drag_needs_friction_the_implicit_ground_and_a_slope_friction_can_hold():
+    with pytest.raises(ValueError, match="implicit contact"):
+        block_on_slope(0.0, young=1e3, drag=5.0, solve="explicit", sharpness=2.0, settle=0.0, drag_frame="body")
+    with pytest.raises(ValueError, match="no friction can hold the body"):
+        block_on_slope(0.7, young=1e3, drag=5.0, settle=0.0, drag_frame="body")
+    with pytest.raises(ValueError, match="drag_frame must be 'lab' or 'body'"):
+        block_on_slope(0.0, young=1e3, drag=5.0, settle=0.0, drag_frame="fluid")
 
 
 def test_ground_refuses_coulomb_without_the_implicit_solve_and_bad_slopes_and_sweeps():

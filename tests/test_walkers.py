@@ -431,6 +431,23 @@ def test_overdamped_walker_on_the_implicit_coulomb_ground_runs_below_the_explici
         walk("prism-walker", sharpness="inf", settle=0.0, periods=0.01, frames=1)
 
 
+def test_a_body_frame_walker_moves_with_the_velocity_that_zeroes_its_net_friction():
+    """drag_frame=body during the wave: the drag acts on the velocity relative to the body velocity U, so the
+    centre of mass moves at exactly U when the friction sums to zero; |P/M - U| = |net friction| / (ζ M) is
+    the solve's residual, here below 2e-4 of the friction's reach μ g / ζ (5e-4 where U is solved only before
+    the sweeps). The explicit ground is refused."""
+    run = walk("sphere-walker", mechanics="overdamped", contact_solve="implicit", sharpness="inf", drag_frame="body",
+               contact_sweeps=4, settle=4, periods=0.03, frames=1)  # fmt: skip
+    dynamics = run.dynamics
+    body = dynamics.solver.body.velocity.numpy()[0]
+    mean = dynamics.momentum() / dynamics.total_mass
+    reach = run.p.friction * run.p.gravity / dynamics.drag
+    assert np.linalg.norm(body[:2]) > 1e-3 * reach  # the wave is moving it
+    assert np.linalg.norm(mean[:2] - body[:2]) < 2e-4 * reach
+    with pytest.raises(ValueError, match="drag_frame=body"):
+        walk("sphere-walker", mechanics="overdamped", drag_frame="body", settle=0.0, periods=0.01, frames=1)
+
+
 @pytest.mark.slow
 def test_bench_locomotion_runs_seeds_and_reports_their_ensemble(tmp_path):
     """--seeds 2 --mechanics overdamped: each twin run with two perturbed rest shapes; the ensemble's mean and

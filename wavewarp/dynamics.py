@@ -42,7 +42,7 @@ from .kernels import dynamics as kernels_dynamics
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import reduce as kernels_reduce
 from .kernels import shell as kernels_shell
-from .kernels.contact import eval_ground, eval_implicit_ground
+from .kernels.contact import BodyFrame, eval_ground, eval_implicit_ground
 from .kernels.dynamics import (
     eval_rigid_correction,
     eval_speed_runaway,
@@ -154,6 +154,7 @@ class InertialSolver:
             # dω̄⁰ at each quadrature point (area contact)
             self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"] if points != n else None
             self.flag = wp.zeros(self.worlds, dtype=wp.int32)  # per world
+            self.body = BodyFrame(wp.zeros(self.worlds, dtype=self.vec3))  # the lab frame: U = 0
         self.contact_damping = self._contact_damping()
 
     def state(self, x0=None, v0=None) -> State:
@@ -240,7 +241,7 @@ class InertialSolver:
                 eval_implicit_ground(self.ground, x, v, self._inverse_mass, self._response_scale(dt), dt, self.mask,
                                      self.shell.tables.patch(), self._rest_area, self._limit_x, self._limit_v,
                                      self._response, self._others, self._normal_force, self._limit_forces,
-                                     self._forces)  # fmt: skip
+                                     self._forces, self.body)  # fmt: skip
                 return
             self.contact_forces(x, v)
             self._integrate(x, v, dt)
@@ -302,16 +303,47 @@ class OverdampedSolver(InertialSolver):
     drag=None picks 2 η_ground (gain ½), the least drag that keeps the lag well damped (no ground: give
     ζ). An implicit ground (`Ground(solve="implicit")`) has no lag: each point's contact and friction
     are solved with its own velocity, v = v* + M⁻¹ Lᵀ f / ζ, at any drag. No background damping: the
-    drag damps every motion.
+    drag damps every motion. drag_frame="body" (implicit ground with friction) moves the drag onto the
+    velocity relative to each world's horizontal body velocity U, which the friction alone then sets:
+    U zeroes the world's net horizontal force (`BodyFrame`; docs/theory/dynamics.md, "Drag in the body
+    frame").
     """
 
     scheme = "overdamped (mobility) shell dynamics"
 
-    def __init__(self, shell: Shell, *, density, drag=None, **options):
+    def __init__(self, shell: Shell, *, density, drag=None, drag_frame="lab", **options):
         if "damping" in options:
             raise ValueError("OverdampedDynamics has no background damping: its drag ζ damps every motion")
         self.drag = None if drag is None else positive("drag", drag)
+        if drag_frame not in ("lab", "body"):
+            raise ValueError(f"drag_frame must be 'lab' or 'body', got {drag_frame!r}")
+        self.drag_frame = drag_frame
         super().__init__(shell, density=density, **options)
+        if drag_frame == "body":
+            self._body_frame()
+
+    def _body_frame(self) -> None:
+        """The drag on the velocity relative to each world's horizontal body velocity U, which the friction alone
+        sets (docs/theory/dynamics.md, "Drag in the body frame")."""
+        ground = self.ground
+        if ground is None or ground.solve != "implicit" or ground.friction <= 0:
+            raise ValueError("drag_frame='body' leaves the horizontal translation to the ground's friction alone: it "
+                             "needs a ground with friction > 0 and the implicit contact (Ground(solve='implicit'), in a "
+                             "scene --set contact_solve=implicit)")  # fmt: skip
+        if abs(math.tan(ground.slope)) >= ground.friction:
+            raise ValueError(f"drag_frame='body' on a slope of tan θ = {math.tan(ground.slope):.6g} >= μ = "
+                             f"{ground.friction:.6g}: no friction can hold the body, and nothing else brakes its "
+                             "translation; use a smaller slope or drag_frame='lab'")  # fmt: skip
+        points = len(self._limit_x)
+        pull = [(m * self.gravity_vector[0], m * self.gravity_vector[1], 0.0) for m in self.world_masses]
+        weight = np.ones(points) if self._rest_area is None else self._rest_area.numpy()
+        with wp.ScopedDevice(self.device):
+            self.body = BodyFrame(
+                wp.zeros(self.worlds, dtype=self.vec3), solve=True,
+                external=wp.array(np.array(pull, dtype=self._real), dtype=self.vec3),
+                weight=wp.array(np.asarray(weight, dtype=self._real), dtype=self.scalar),
+                force_sum=wp.zeros(self.worlds, dtype=self.vec3), stiffness_sum=wp.zeros(self.worlds, dtype=self.scalar),
+                threads=reduction_threads(points // self.worlds, self.shell.deterministic))  # fmt: skip
 
     def _contact_damping(self) -> float:
         eta = super()._contact_damping()

@@ -72,6 +72,9 @@ class WalkerParameters:
     mechanics: str = param("inertial", "inertial: symplectic Euler with lumped mass; overdamped: the mobility model "
                            "ζ M v = F", choices=("inertial", "overdamped"))  # fmt: skip
     drag: float = param(0.0, "overdamped mechanics: drag ζ per unit mass; auto (0) = 2 η_ground", minimum=0.0, auto=True)
+    drag_frame: str = param("lab", "overdamped mechanics: lab: the drag brakes every motion; body: it acts on the velocity "
+                            "relative to the body's horizontal translation, which the friction alone sets (needs "
+                            "contact_solve=implicit)", choices=("lab", "body"))  # fmt: skip
     dt: float = param(0.5, "chemistry step (explicit FHN); auto (0) = 0.4 × the settled shell's stability bound, or "
                       "less where frames asks for more frames", minimum=0.0, auto=True)  # fmt: skip
     mass_corrections: int = param(2, "Richardson steps from the lumped towards the consistent mass in the diffusion",
@@ -141,6 +144,9 @@ def place_walker(mesh: Mesh, p, origin) -> Placement:
         per = p.contact_area or area / mesh.n_vertices
     if p.sharpness == math.inf and p.contact_solve != "implicit":
         raise SceneError("sharpness=inf (Coulomb's law) needs the implicit contact: --set contact_solve=implicit")
+    if p.drag_frame == "body" and (p.mechanics != "overdamped" or p.contact_solve != "implicit"):
+        raise SceneError("drag_frame=body is a drag of the overdamped mechanics that leaves the translation to the "
+                         "friction: --set mechanics=overdamped --set contact_solve=implicit")  # fmt: skip
     if p.slope > 60.0:
         raise SceneError(f"bad value for slope: {p.slope!r} (must be <= 60 degrees)")
     ground = Ground(stiffness=p.stiffness / per, damping=p.contact_damping / per, friction=p.friction,
@@ -176,7 +182,7 @@ def walker_dynamics(model, p, dt=None):
     """The walkers' inertial (or overdamped) shell dynamics on `model`, bound by ω over the references the
     wave visits (`bound_over_reference_range`); its step `dt` (None: safety × the bound)."""
     if p.mechanics == "overdamped":
-        dynamics = model.dynamics(overdamped=True, drag=p.drag or None, safety=p.safety)
+        dynamics = model.dynamics(overdamped=True, drag=p.drag or None, drag_frame=p.drag_frame, safety=p.safety)
     else:
         dynamics = model.dynamics(damping=p.damping, safety=p.safety)
     dynamics.set_time_step(dt, bound_over_reference_range(dynamics))
