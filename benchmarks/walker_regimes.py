@@ -32,6 +32,7 @@ import shutil
 import sys
 from datetime import date
 
+import dask
 import matplotlib
 
 matplotlib.use("Agg")
@@ -67,14 +68,16 @@ REGIMES = {
 }  # fmt: skip
 
 
-def run_regime(regime: str, scene: str, args, device: str, executor) -> None:
+def run_regime(regime: str, scene: str, args, device: str, executor, priority: int = 0) -> None:
     """The sweep of `scene`'s twins over the seeds in `regime` on `executor` in OUT/sweeps/REGIME_SCENE (the
-    seeds done there are skipped), its table kept as OUT/REGIME_SCENE.csv."""
+    seeds done there are skipped; its batches carry the Dask `priority`, higher first), its table kept as
+    OUT/REGIME_SCENE.csv."""
     fixed = (f"noise={args.noise}", f"periods={args.periods}", *REGIMES[regime], *args.set)
     spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
                      device=device)  # fmt: skip
     folder = os.path.join(args.out, "sweeps", f"{regime}_{scene}")
-    sweep(spec, folder, batch=args.seeds, executor=executor, report=lambda line: print(f"{regime} {scene}: {line}"))
+    with dask.annotate(priority=priority):
+        sweep(spec, folder, batch=args.seeds, executor=executor, report=lambda line: print(f"{regime} {scene}: {line}"))
     shutil.copy(os.path.join(folder, "table.csv"), os.path.join(args.out, f"{regime}_{scene}.csv"))
 
 
@@ -84,9 +87,10 @@ def run_regimes(pairs: list, args, device: str) -> None:
     batches start in the order of `pairs` (Dask priorities): put the costliest first."""
     with local_cluster(device) as cluster, Client(cluster) as client:
         print(f"Dask: {len(client.scheduler_info()['workers'])} workers; dashboard {client.dashboard_link}")
-        executors = [client.get_executor(priority=len(pairs) - k) for k in range(len(pairs))]
+        executor = client.get_executor()
         with concurrent.futures.ThreadPoolExecutor(len(pairs)) as threads:
-            list(threads.map(lambda pair, executor: run_regime(*pair, args, device, executor), pairs, executors))  # raises a sweep's error
+            list(threads.map(lambda pair, priority: run_regime(*pair, args, device, executor, priority), pairs,
+                             range(len(pairs), 0, -1)))  # raises a sweep's error  # fmt: skip
 
 
 def pulses(row: dict) -> list:

@@ -421,7 +421,7 @@ class BodyFrame:
     force_sum: wp.array | None = None
     stiffness_sum: wp.array | None = None
     threads: int = 0
-    iterations: tuple = (2, 1)
+    iterations: tuple = (2, 2)
 
 
 def solve_body_velocity(body: BodyFrame, ground, points: wp.array, u: wp.array, response: wp.array, scale: float,

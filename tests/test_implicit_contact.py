@@ -121,29 +121,29 @@ def test_overdamped_block_follows_the_regularised_friction_balance():
     assert along_slope_velocity(run) == pytest.approx(balance, rel=1e-3)
 
 
-def held_on_slope(tan_theta):
-    """The block settled (inertial, Coulomb: it sticks) on the slope, its normal forces balancing g cos θ."""
-    return block_on_slope(tan_theta, young=1e3, settle=3.0, sweeps=32)
+@pytest.fixture(scope="module")
+def held():
+    """The block's positions settled (inertial, Coulomb: it sticks) on tan θ = 0.3, its normal forces
+    balancing g cos θ."""
+    return block_on_slope(0.3, young=1e3, settle=3.0, sweeps=32).positions()
 
 
 @pytest.mark.parametrize("drag", [5.0, pytest.param(61.0, marks=pytest.mark.slow)])
-def test_body_frame_drag_leaves_the_slide_to_the_friction_balance_at_any_drag(drag):
+def test_body_frame_drag_leaves_the_slide_to_the_friction_balance_at_any_drag(held, drag):
     """Drag in the body frame brakes no translation: the block slides where μ N tanh(k_f v) = M g sin θ,
     v = atanh(tan θ / μ) / k_f, as with inertia and whatever ζ; in the lab frame the drag takes its share
     (v + (μ g cos θ / ζ) tanh(k_f v) = g sin θ / ζ)."""
     k_f, theta = 2.0, math.atan(0.3)
-    x0 = held_on_slope(0.3).positions()
-    body = block_on_slope(0.3, sharpness=k_f, young=1e3, drag=drag, settle=1.0, sweeps=32, drag_frame="body", x0=x0)
+    body = block_on_slope(0.3, sharpness=k_f, young=1e3, drag=drag, settle=1.0, sweeps=16, drag_frame="body", x0=held)
     assert along_slope_velocity(body) == pytest.approx(math.atanh(0.3 / MU) / k_f, rel=5e-3)
     assert body.solver.body.velocity.numpy()[0, 0] == pytest.approx(along_slope_velocity(body), rel=1e-6)
     lab = brentq(lambda v: v + MU * G * math.cos(theta) / drag * math.tanh(k_f * v) - G * math.sin(theta) / drag, 0.0, 10.0)
     assert lab < 0.7 * along_slope_velocity(body)
 
 
-def test_body_frame_coulomb_block_sticks_below_the_static_threshold():
+def test_body_frame_coulomb_block_sticks_below_the_static_threshold(held):
     """tan θ = 0.3 < μ: nothing but Coulomb friction holds the block, and it holds (below 1e-3 of the k_f = 2 slide)."""
-    x0 = held_on_slope(0.3).positions()
-    body = block_on_slope(0.3, young=1e3, drag=5.0, settle=1.0, sweeps=32, drag_frame="body", x0=x0)
+    body = block_on_slope(0.3, young=1e3, drag=5.0, settle=1.0, sweeps=16, drag_frame="body", x0=held)
     assert abs(along_slope_velocity(body)) < 1e-3 * math.atanh(0.3 / MU) / 2.0
 
 

@@ -432,18 +432,18 @@ def test_overdamped_walker_on_the_implicit_coulomb_ground_runs_below_the_explici
 
 
 def test_a_body_frame_walker_moves_with_the_velocity_that_zeroes_its_net_friction():
-    """drag_frame=body during the wave: the drag acts on the velocity relative to the body velocity U, so the
-    centre of mass moves at exactly U when the friction sums to zero; |P/M - U| = |net friction| / (ζ M) is
-    the solve's residual, here below 2e-4 of the friction's reach μ g / ζ (5e-4 where U is solved only before
-    the sweeps). The explicit ground is refused."""
+    """drag_frame=body on the deforming shell: the drag acts on the velocity relative to the body velocity U,
+    so the centre of mass moves at exactly U when the friction sums to zero; |P/M - U| = |net friction| /
+    (ζ M) is the solve's residual, below 1e-3 of the friction's reach μ g / ζ (a wrong or missing U would
+    leave a residual of the order of U). The explicit ground is refused."""
     run = walk("sphere-walker", mechanics="overdamped", contact_solve="implicit", sharpness="inf", drag_frame="body",
-               contact_sweeps=4, settle=4, periods=0.03, frames=1)  # fmt: skip
+               contact_sweeps=2, settle=2, periods=0.01, frames=1)  # fmt: skip
     dynamics = run.dynamics
     body = dynamics.solver.body.velocity.numpy()[0]
     mean = dynamics.momentum() / dynamics.total_mass
     reach = run.p.friction * run.p.gravity / dynamics.drag
-    assert np.linalg.norm(body[:2]) > 1e-3 * reach  # the wave is moving it
-    assert np.linalg.norm(mean[:2] - body[:2]) < 2e-4 * reach
+    assert np.linalg.norm(body[:2]) > 0.1 * reach  # still settling: the body moves
+    assert np.linalg.norm(mean[:2] - body[:2]) < 1e-3 * reach
     with pytest.raises(ValueError, match="drag_frame=body"):
         walk("sphere-walker", mechanics="overdamped", drag_frame="body", settle=0.0, periods=0.01, frames=1)
 
