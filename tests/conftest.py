@@ -1,6 +1,10 @@
-"""Shared fixtures: every kernel test runs on the CPU and, where CUDA is present, on cuda:0."""
+"""Shared fixtures: every kernel test runs on the CPU and, where CUDA is present, on cuda:0. Under
+pytest-xdist the controller first compiles wavewarp's kernel modules for the CPU, split over two
+processes, so that the workers find them in the kernel cache instead of each compiling all of them."""
 
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -22,3 +26,22 @@ def device(request):
 @pytest.fixture
 def rng():
     return np.random.default_rng(int(os.environ.get("WAVEWARP_TEST_SEED", "20261123")))
+
+
+COMPILE_GROUPS = (("contact", "laplace", "newton", "reduce"),
+                  ("shell", "relax", "waves", "dynamics", "limit_surface", "self_contact"))  # about 25 s and 32 s
+
+
+def pytest_sessionstart(session):
+    """Before xdist starts its workers (its own hook runs last): the kernel modules, compiled once."""
+    if hasattr(session.config, "workerinput") or not session.config.pluginmanager.hasplugin("xdist"):
+        return
+    if not getattr(session.config.option, "numprocesses", None):
+        return
+    compile_one = ("import sys, warp as wp, importlib; from wavewarp.device import init_warp; init_warp(); "
+                   "[wp.load_module(importlib.import_module('wavewarp.kernels.' + name), device='cpu') "
+                   "for name in sys.argv[1:]]")  # fmt: skip
+    jobs = [subprocess.Popen([sys.executable, "-c", compile_one, *group], stdout=subprocess.DEVNULL)
+            for group in COMPILE_GROUPS]
+    for job in jobs:
+        job.wait()

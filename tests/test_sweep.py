@@ -19,7 +19,7 @@ import pytest
 import warp as wp
 
 from wavewarp import cli, kernels, walker
-from wavewarp.device import set_deterministic
+from wavewarp.device import deterministic_default, set_deterministic
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import SceneError, load_scene, resolve
 from wavewarp.sweep import (LISTED_COLUMNS, Point, SweepSpec, batches, grid_points, measurement_columns, merge_kernel_cache,
@@ -274,10 +274,16 @@ def test_workers_kernels_are_merged_back_into_the_cache(tmp_path):
 
 
 def test_deterministic_mode_reaches_every_kernel_module():
+    """With CUDA every kernel module takes Warp's run-to-run mode; without, the modules keep their options
+    (the CPU's atomics are ordered already: no second compile) while the gathers and reductions still
+    choose their fixed order."""
     modules = [importlib.import_module(f"wavewarp.kernels.{m.name}") for m in pkgutil.iter_modules(kernels.__path__)]
+    on = wp.DeterministicMode.RUN_TO_RUN if wp.is_cuda_available() else wp.DeterministicMode.NOT_GUARANTEED
     try:
         set_deterministic(True)
-        assert all(wp.get_module_options(m)["deterministic"] == wp.DeterministicMode.RUN_TO_RUN for m in modules)
+        assert all(wp.get_module_options(m)["deterministic"] == on for m in modules)
+        assert deterministic_default() is True
     finally:
         set_deterministic(False)
     assert all(wp.get_module_options(m)["deterministic"] == wp.DeterministicMode.NOT_GUARANTEED for m in modules)
+    assert deterministic_default() is False

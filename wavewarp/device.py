@@ -49,10 +49,15 @@ def init_warp() -> None:
 def set_deterministic(on: bool) -> None:
     """Bit-exact repeated runs on a GPU (a CPU run is deterministic either way), for what is built
     after the call: the shell's forces and the Laplace–Beltrami actions gather in a fixed order,
-    block reductions run in one block, and the remaining atomics use Warp's run-to-run
-    deterministic mode (every kernel module of wavewarp and every module created later)."""
+    block reductions run in one block, and, where CUDA is present, the remaining atomics use Warp's
+    run-to-run deterministic mode (every kernel module of wavewarp and every module created later;
+    without CUDA the modules keep their options: the CPU's atomics are ordered already, and the
+    modules need not be compiled a second time)."""
     mode = wp.DeterministicMode.RUN_TO_RUN if on else wp.DeterministicMode.NOT_GUARANTEED
     wp.config.deterministic, wp.config.deterministic_max_records = mode, DETERMINISTIC_RECORDS["default"] if on else 0
+    init_warp()
+    if not wp.is_cuda_available():
+        return
     for info in pkgutil.iter_modules(kernels.__path__):
         records = DETERMINISTIC_RECORDS.get(info.name, DETERMINISTIC_RECORDS["default"]) if on else 0
         wp.set_module_options({"deterministic": mode, "deterministic_max_records": records},
