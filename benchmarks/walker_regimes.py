@@ -101,11 +101,16 @@ def pulses(row: dict) -> list:
     return out
 
 
+def seeds_of(rows: list, sensitive: bool) -> list:
+    """The rows of one twin that have a speed (a whole period)."""
+    return [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
+
+
 def twin(rows: list, sensitive: bool) -> dict:
     """n, speeds, mean, sd, share of seeds moving forward, mean period and (tables that have them) the
     share of all pulses moving forward, the mean rolling angle over the run, in degrees, and the mean
     settled sag / R of one twin's seeds."""
-    chosen = [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
+    chosen = seeds_of(rows, sensitive)
     speeds = [float(r["speed_R_per_T"]) for r in chosen]
     every_pulse = [d for r in chosen for d in pulses(r)]
     n = len(speeds)
@@ -118,21 +123,25 @@ def twin(rows: list, sensitive: bool) -> dict:
             "sd": float(np.std(speeds, ddof=1)) if n > 1 else 0.0,
             "forward_share": sum(s > 0 for s in speeds) / n if n else None,
             "pulse_forward_share": float(np.mean([d > 0 for d in every_pulse])) if every_pulse else None,
-            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R"),
-            "pulses": [pulses(r) for r in chosen], "seed_periods": [float(r["period"]) for r in chosen]}  # fmt: skip
+            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R")}  # fmt: skip
 
 
-def compared(s: dict, i: dict) -> tuple:
-    """The twins' per-seed speeds on one footing, and its name. The sensitive twin's shorter period gives
-    it more whole pulses in the same run, and pulses differ (the first is often the largest): where the
-    tables list the pulses, each seed's speed is its mean over the first k pulses, k the fewest any seed
-    of either twin has, per unit time (÷ its period); else the whole runs' per-pulse speeds."""
-    k = min((len(p) for t in (s, i) for p in t["pulses"]), default=0)
-    if k == 0:
-        return s["speeds"], i["speeds"], "whole runs, per pulse"
-    def per_time(t):
-        return [float(np.mean(p[:k])) / period for p, period in zip(t["pulses"], t["seed_periods"])]
-    return per_time(s), per_time(i), f"first {k} pulse(s) of every seed, per unit time"
+def compared(rows: list) -> tuple:
+    """The twins' per-seed speeds (sensitive, insensitive) on one footing, and its name. The sensitive twin's
+    shorter period gives it more whole pulses in the same run, and pulses differ (the first is often the
+    largest): where the tables list the pulses, each seed's speed is its mean over the first k pulses, k
+    the fewest any seed of either twin has, per unit time (÷ its period); else the whole runs' per-pulse
+    speeds."""
+    sensitive, insensitive = seeds_of(rows, True), seeds_of(rows, False)
+    k = min((len(pulses(r)) for r in sensitive + insensitive), default=0)
+
+    def speeds(chosen):
+        if k == 0:
+            return [float(r["speed_R_per_T"]) for r in chosen]
+        return [float(np.mean(pulses(r)[:k])) / float(r["period"]) for r in chosen]
+
+    footing = f"first {k} pulse(s) of every seed, per unit time" if k else "whole runs, per pulse"
+    return speeds(sensitive), speeds(insensitive), footing
 
 
 def mean_and_error(values: list) -> tuple:
@@ -147,14 +156,12 @@ def twins(rows: list) -> dict:
     cell = {"sensitive": s, "insensitive": i, "compared": None, "speed_ratio": None, "speed_ratio_spread": None,
             "period_ratio": None, "separation": None}  # fmt: skip
     if s["n"] and i["n"]:
-        sensitive, insensitive, cell["compared"] = compared(s, i)
+        sensitive, insensitive, cell["compared"] = compared(rows)
         (ms, es), (mi, ei) = mean_and_error(sensitive), mean_and_error(insensitive)
         cell.update(period_ratio=s["period"] / i["period"], separation=(ms - mi) / math.hypot(es, ei) if es or ei else None)
         if ms != 0 and mi != 0:
             ratio = ms / mi
             cell.update(speed_ratio=ratio, speed_ratio_spread=abs(ratio) * math.hypot(es / ms, ei / mi))
-    for t in (s, i):
-        del t["pulses"], t["seed_periods"]
     return cell
 
 

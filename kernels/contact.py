@@ -424,12 +424,12 @@ class BodyFrame:
     iterations: tuple = (2, 2)
 
 
-def solve_body_velocity(body: BodyFrame, ground, points: wp.array, u: wp.array, response: wp.array, scale: float,
-                        dt: float, iterations: int) -> None:  # fmt: skip
+def solve_body_velocity(body: BodyFrame, points: wp.array, u: wp.array, response: wp.array, laws: list,
+                        iterations: int) -> None:  # fmt: skip
     """`iterations` Weiszfeld steps of each world's body velocity U on its net horizontal force (`body_friction_sums_kernel`,
-    `body_velocity_kernel`), the points' velocities without friction `u` (plus U)."""
-    s, device, worlds = scalar_of(response), points.device, len(body.velocity)
-    laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
+    `body_velocity_kernel`), the points' velocities without friction `u` (plus U); `laws` those of
+    `implicit_contact_kernel` (scale, dt, k, β, μ, k_f)."""
+    device, worlds = points.device, len(body.velocity)
     for _ in range(iterations):
         wp.launch(body_friction_sums_kernel, dim=worlds * body.threads,
                   inputs=[points, u, response, body.weight, *laws, body.velocity, body.threads],
@@ -458,7 +458,7 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
     laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
     if body.solve:
         body.velocity.zero_()
-        solve_body_velocity(body, ground, points, velocities, response, scale, dt, body.iterations[0])
+        solve_body_velocity(body, points, velocities, response, laws, body.iterations[0])
     wp.launch(implicit_contact_kernel, dim=n, inputs=[points, velocities, response, *laws, body.velocity],
               outputs=[normal_force, point_forces], device=device)  # fmt: skip
     coupled = limit_coupled_velocity_kernel if point else quadrature_coupled_velocity_kernel
@@ -468,7 +468,7 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
         wp.launch(coupled, dim=n, inputs=[load, inverse_mass, s(scale), *tables, velocities, response, point_forces],
                   outputs=[others], device=device)  # fmt: skip
         if body.solve:
-            solve_body_velocity(body, ground, points, others, response, scale, dt, body.iterations[1])
+            solve_body_velocity(body, points, others, response, laws, body.iterations[1])
         wp.launch(implicit_contact_kernel, dim=n, inputs=[points, others, response, *laws, body.velocity],
                   outputs=[normal_force, point_forces], device=device)  # fmt: skip
     load.zero_()
