@@ -78,16 +78,17 @@ def seconds_per_call(call, device, budget: float, repeats: int = 5) -> float:
     return float(np.median(timings))
 
 
-def walker_shell(level: int, device, dtype, deterministic=False, volume=True):
+def walker_shell(level: int, device, dtype, deterministic=False, volume=True, staged_block=None):
     """The sphere walker's shell on a level-`level` icosphere resting on the ground (volume=False:
-    without the volume penalty, the Koiter terms alone)."""
+    without the volume penalty, the Koiter terms alone; staged_block: Shell's)."""
     mesh = icosphere(RADIUS, level)
     weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
     touching, depth = ground_lift(mesh, weight, walker_ground())
     mesh = Mesh(mesh.vertices + [0.0, 0.0, touching - depth], mesh.triangles)
     penalty = MU_V * WALKER["young"] * THICKNESS / RADIUS**4 if volume else 0.0
     shell = Shell(mesh, thickness=THICKNESS, young=WALKER["young"], poisson=WALKER["poisson"], AC=AC, AI=0.0,
-                  volume_penalty=penalty, deterministic=deterministic, device=device, dtype=dtype)  # fmt: skip
+                  volume_penalty=penalty, deterministic=deterministic, staged_block=staged_block, device=device,
+                  dtype=dtype)  # fmt: skip
     return mesh, shell
 
 
@@ -151,19 +152,26 @@ def fma_kernel(iterations: int, out: wp.array(dtype=wp.float32)):
     out[i] = x[0] + x[1] + x[2] + x[3] + y[0] + y[1] + y[2] + y[3]
 
 
-def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: bool, gather_max_level: int) -> list:
+def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: bool, gather_max_level: int,
+                staged_blocks=()) -> list:  # fmt: skip
+    """One level's kernel timings; the staged force kernels (`staged_blocks`, triangles per block) also
+    record their largest force difference from the atomic scatter's, relative to its largest force."""
     rows = []
     mesh, shell = walker_shell(level, device, dtype)
     rng = np.random.default_rng(level)
     x = mesh.vertices * (1 + 0.01 * rng.standard_normal((mesh.n_vertices, 1)))
     c = rng.random(mesh.n_vertices)
-    shells = [("koiter forces, atomic scatter", False)] + (
-        [("koiter forces, deterministic gather", True)] if level <= gather_max_level else [])  # fmt: skip
-    for name, deterministic in shells:
-        koiter = walker_shell(level, device, dtype, deterministic=deterministic, volume=False)[1]
-        koiter.forces(x, c)
+    shells = [("koiter forces, atomic scatter", dict())]
+    shells += [("koiter forces, deterministic gather", dict(deterministic=True))] if level <= gather_max_level else []
+    shells += [(f"koiter forces, staged {b} per block", dict(staged_block=b)) for b in staged_blocks]
+    reference = None
+    for name, options in shells:
+        koiter = walker_shell(level, device, dtype, volume=False, **options)[1]
+        forces = koiter.forces(x, c)
+        reference = forces if reference is None else reference
         rows.append(dict(kernel=name, seconds=seconds_per_call(lambda s=koiter: s.forces_device(s._x, s._forces),
-                                                               device, budget), **koiter_counts(koiter)))  # fmt: skip
+                                                               device, budget), **koiter_counts(koiter),
+                         max_relative_difference=float(np.abs(forces - reference).max() / np.abs(reference).max())))  # fmt: skip
     shell.forces(x, c)
     rows.append(dict(kernel="shell forces (koiter + volume)",
                      seconds=seconds_per_call(lambda: shell.forces_device(shell._x, shell._forces), device, budget)))  # fmt: skip
@@ -282,7 +290,8 @@ def report(rows: list, peaks: dict) -> None:
             row["speedup_vs_numpy"] = numpy / row["seconds"]
         print(f"{row['triangles']:>9d} tri {row['dtype']} {row['kernel']:38s} {row['seconds'] * 1e3:9.4f} ms "
               f"{row['triangles_per_second']:9.3e} tri/s" + (f"  {row['times_floor']:.1f}x floor" if "times_floor" in row
-              else "") + (f"  x{row['speedup_vs_numpy']:.1f} vs NumPy" if "speedup_vs_numpy" in row else ""),
+              else "") + (f"  x{row['speedup_vs_numpy']:.1f} vs NumPy" if "speedup_vs_numpy" in row else "")
+              + (f"  max |dF|/max|F| {row['max_relative_difference']:.1e}" if "max_relative_difference" in row else ""),
               flush=True)  # fmt: skip
 
 
@@ -294,6 +303,9 @@ def main(argv=None) -> int:
                         help="levels of the walker steps (level 6 at the scene's dt_c: 1,386 substeps, slow to capture)")
     parser.add_argument("--numpy-max-level", type=int, default=6, help="skip the NumPy baseline above this level")
     parser.add_argument("--gather-max-level", type=int, default=7, help="skip the deterministic gather above this level")
+    parser.add_argument("--staged-blocks", type=int, nargs="*", default=None,
+                        help="triangles per block of the staged force kernel's rows (default 64 128 256 on CUDA, 1 on "
+                             "the CPU)")  # fmt: skip
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3, short timings (smoke test)")
@@ -301,6 +313,7 @@ def main(argv=None) -> int:
     wp.config.log_level = wp.LOG_WARNING
     device = resolve_device(args.device)
     levels, step_levels, budget = ([2, 3], [2], 0.05) if args.quick else (args.levels, args.step_levels, args.budget)
+    staged = args.staged_blocks if args.staged_blocks is not None else ([1] if device.is_cpu else [64, 128, 256])
     peaks = machine_peaks(device)
     print(f"{device.alias}: copy bandwidth {peaks['bandwidth_bytes_per_s']:.3g} B/s, "
           f"multiply-add {peaks['flops_per_s']:.3g} flop/s (float32)")  # fmt: skip
@@ -308,7 +321,8 @@ def main(argv=None) -> int:
     for level in levels:
         rows = []
         for dtype in ("float32", "float64"):
-            rows += kernel_rows(level, device.alias, dtype, budget, level <= args.numpy_max_level, args.gather_max_level)
+            rows += kernel_rows(level, device.alias, dtype, budget, level <= args.numpy_max_level, args.gather_max_level,
+                                staged)  # fmt: skip
         kernels += rows
         report(rows, peaks)
     for level in step_levels:

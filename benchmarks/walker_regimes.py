@@ -13,10 +13,12 @@ OUT/walker_regimes.json — per regime, scene and twin: n, mean and standard dev
 speed_R_per_T (the forward displacement per pulse, in R), the share of seeds moving along the wave
 and the mean period; per regime and scene the twins' speed ratio (sensitive / insensitive, each seed's
 speed per unit time over the first pulses every seed of both twins has where the tables list the pulses,
-else the whole runs' per-pulse speeds; its spread from the two standard errors) and period ratio; and
-the paper's three claims checked on the same footing — every twin moves along the wave (every pulse,
-where the tables list them), the sensitive sphere is faster (by more than two standard errors), the
-sensitive prism is more than twice as fast as its twin (undecided, null, with one seed a twin) — and
+else the whole runs' per-pulse speeds; its spread from the two standard errors), the ratio of the whole
+runs' distances in the same time (start-up and last unfinished pulse included) and the period ratio; and
+the paper's three claims — every twin moves along the wave (every pulse, where the tables list them), the
+sensitive sphere is faster (by more than two standard errors on both footings; undecided, null, where
+they disagree — a gait still changing over the run — or with one seed a twin), the sensitive prism is
+more than twice as fast as its twin with both moving forward — and
 OUT/walker_regimes.png.
 """
 
@@ -126,21 +128,24 @@ def twin(rows: list, sensitive: bool) -> dict:
             "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R")}  # fmt: skip
 
 
-def compared(rows: list) -> tuple:
+def compared(rows: list, skip: int = 0) -> tuple:
     """The twins' per-seed speeds (sensitive, insensitive) on one footing, and its name. The sensitive twin's
     shorter period gives it more whole pulses in the same run, and pulses differ (the first is often the
-    largest): where the tables list the pulses, each seed's speed is its mean over the first k pulses, k
-    the fewest any seed of either twin has, per unit time (÷ its period); else the whole runs' per-pulse
-    speeds."""
+    largest): where the tables list the pulses, each seed's speed is its mean over its pulses skip + 1 to k,
+    k the fewest any seed of either twin has, per unit time (÷ its period); else the whole runs' per-pulse
+    speeds. `skip` leaves out the gait's start-up."""
     sensitive, insensitive = seeds_of(rows, True), seeds_of(rows, False)
     k = min((len(pulses(r)) for r in sensitive + insensitive), default=0)
+    if 0 < k <= skip:
+        raise ValueError(f"--skip-pulses {skip}: some seed has only {k} whole pulse(s); run more periods")
 
     def speeds(chosen):
         if k == 0:
             return [float(r["speed_R_per_T"]) for r in chosen]
-        return [float(np.mean(pulses(r)[:k])) / float(r["period"]) for r in chosen]
+        return [float(np.mean(pulses(r)[skip:k])) / float(r["period"]) for r in chosen]
 
-    footing = f"first {k} pulse(s) of every seed, per unit time" if k else "whole runs, per pulse"
+    footing = (f"pulses {skip + 1} to {k} of every seed, per unit time" if skip else
+               f"first {k} pulse(s) of every seed, per unit time") if k else "whole runs, per pulse"  # fmt: skip
     return speeds(sensitive), speeds(insensitive), footing
 
 
@@ -149,28 +154,45 @@ def mean_and_error(values: list) -> tuple:
     return float(np.mean(values)), float(np.std(values, ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
-def twins(rows: list) -> dict:
+def twins(rows: list, skip: int = 0) -> dict:
     """Both twins, and the speed ratio sensitive / insensitive (on the footing of `compared`) with its
-    first-order spread, and the period ratio."""
+    first-order spread, the period ratio and (without `skip`, whose point is to leave the start-up out)
+    the whole runs' `distances`."""
     s, i = twin(rows, True), twin(rows, False)
-    cell = {"sensitive": s, "insensitive": i, "compared": None, "speed_ratio": None, "speed_ratio_spread": None,
-            "period_ratio": None, "separation": None}  # fmt: skip
+    cell = {"sensitive": s, "insensitive": i, "compared": None, "compared_speeds": None, "speed_ratio": None,
+            "speed_ratio_spread": None, "period_ratio": None, "separation": None}  # fmt: skip
     if s["n"] and i["n"]:
-        sensitive, insensitive, cell["compared"] = compared(rows)
+        sensitive, insensitive, cell["compared"] = compared(rows, skip)
         (ms, es), (mi, ei) = mean_and_error(sensitive), mean_and_error(insensitive)
-        cell.update(period_ratio=s["period"] / i["period"], separation=(ms - mi) / math.hypot(es, ei) if es or ei else None)
+        cell.update(compared_speeds=[ms, mi], period_ratio=s["period"] / i["period"],
+                    separation=(ms - mi) / math.hypot(es, ei) if es or ei else None)  # fmt: skip
         if ms != 0 and mi != 0:
             ratio = ms / mi
             cell.update(speed_ratio=ratio, speed_ratio_spread=abs(ratio) * math.hypot(es / ms, ei / mi))
+        cell.update(distances(rows) if not skip else {})
     return cell
+
+
+def distances(rows: list) -> dict:
+    """The other footing, where every seed of both twins ran the same time: the whole run's forward distance
+    (start-up and the last, unfinished pulse included), its ratio sensitive / insensitive and the separation
+    of the twins' means in standard errors. Empty where the tables lack it."""
+    chosen = seeds_of(rows, True) + seeds_of(rows, False)
+    if not all(r.get("distance_R") and r.get("time") for r in chosen) or len({float(r["time"]) for r in chosen}) != 1:
+        return {}
+    (ms, es), (mi, ei) = (mean_and_error([float(r["distance_R"]) for r in seeds_of(rows, flag)]) for flag in (True, False))
+    return {"distances": [ms, mi], "distance_ratio": ms / mi if mi else None,
+            "distance_separation": (ms - mi) / math.hypot(es, ei) if es or ei else None}
 
 
 def claims(scenes: dict) -> dict:
     """The paper's claims for one regime (None where a scene is missing)."""
-    def separated(cell):  # None with fewer than two seeds a twin: no spread to separate them by
-        if min(cell["sensitive"]["n"], cell["insensitive"]["n"]) < 2 or cell["separation"] is None:
+    def separated(cell):  # None with fewer than two seeds a twin, or where the two footings disagree
+        if min(cell["sensitive"]["n"], cell["insensitive"]["n"]) < 2:
             return None
-        return cell["separation"] > 2
+        footings = ((cell["compared_speeds"], cell["separation"]), (cell.get("distances"), cell.get("distance_separation")))
+        verdicts = {means[0] > 0 and sep > 2 for means, sep in footings if sep is not None}  # faster along the wave
+        return verdicts.pop() if len(verdicts) == 1 else None
 
     complete = [c for c in scenes.values() if c["sensitive"]["n"] and c["insensitive"]["n"]]
     sphere, prism = scenes.get("sphere-walker"), scenes.get("prism-walker")
@@ -179,15 +201,21 @@ def claims(scenes: dict) -> dict:
 
     return {"forward": all(forward(c[t]) for c in complete for t in ("sensitive", "insensitive")) if complete else None,
             "sensitive_sphere_faster": separated(sphere) if sphere and sphere["sensitive"]["n"] else None,
-            "prism_ratio_above_2": (prism["sensitive"]["mean"] > 0 and prism["speed_ratio"] is not None
-                                    and prism["speed_ratio"] > 2) if prism and prism["sensitive"]["n"] else None}  # fmt: skip
+            "prism_ratio_above_2": prism_faster_twice(prism) if prism and prism["sensitive"]["n"] else None}  # fmt: skip
 
 
-def summary(tables: dict) -> dict:
-    """{regime: {"scenes": {scene: twins}, "claims": ...}} from {(regime, scene): rows}."""
+def prism_faster_twice(cell: dict) -> bool:
+    """Claim 3 on the twins' compared speeds (`compared`, else whole runs): both move forward and the sensitive
+    twin more than twice as fast (a ratio of two backward speeds is no claim)."""
+    sensitive, insensitive = cell["compared_speeds"] or (cell["sensitive"]["mean"], cell["insensitive"]["mean"] or 0.0)
+    return bool(sensitive > 0 and insensitive > 0 and sensitive > 2 * insensitive)
+
+
+def summary(tables: dict, skip: int = 0) -> dict:
+    """{regime: {"scenes": {scene: twins}, "claims": ...}} from {(regime, scene): rows}; `skip`: `compared`'s."""
     regimes = {}
     for (regime, scene), rows in tables.items():
-        regimes.setdefault(regime, {"scenes": {}})["scenes"][scene] = twins(rows)
+        regimes.setdefault(regime, {"scenes": {}})["scenes"][scene] = twins(rows, skip)
     for regime in regimes.values():
         regime["claims"] = claims(regime["scenes"])
     return regimes
@@ -246,8 +274,12 @@ def main(argv=None) -> int:
     parser.add_argument("--tables", default=None, metavar="DIR", help="summarise the tables REGIME_SCENE.csv in DIR")
     parser.add_argument("--device-name", default=None, help="with --tables: the GPU or CPU that computed them")
     parser.add_argument("--out", default=None, help="folder for the tables, JSON and chart (default: --tables, else .)")
+    parser.add_argument("--skip-pulses", type=int, default=0, metavar="N",
+                        help="compare the twins without each seed's first N pulses (the gait's start-up; long runs)")
     parser.add_argument("--quick", action="store_true", help="the scenes' quick runs (a CPU smoke run)")
     args = parser.parse_args(argv)
+    if args.skip_pulses < 0:
+        parser.error(f"--skip-pulses must be >= 0, got {args.skip_pulses}")
     args.out = args.out or args.tables or "."
     os.makedirs(args.out, exist_ok=True)
     if args.tables is not None:
@@ -269,7 +301,12 @@ def main(argv=None) -> int:
     tables = read_tables(args.tables or args.out, args.regimes, args.scenes)
     if not tables:
         parser.error(f"no tables REGIME_SCENE.csv for {', '.join(args.regimes)} in {args.tables or args.out}")
-    result = dict(benchmark="walker_regimes", date=date.today().isoformat(), **described, regimes=summary(tables))
+    try:
+        regimes = summary(tables, args.skip_pulses)
+    except ValueError as error:
+        parser.error(str(error))
+    result = dict(benchmark="walker_regimes", date=date.today().isoformat(), **described, skip_pulses=args.skip_pulses,
+                  regimes=regimes)  # fmt: skip
     def speed(twin):
         return "no whole period" if twin["mean"] is None else f"{twin['mean']:+.3g}"
 

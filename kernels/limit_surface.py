@@ -19,14 +19,15 @@ def basis_row(triangle_type: wp.array(dtype=wp.int32), points_per_triangle: int,
 
 @wp.func
 def patch_jet(
-    x: wp.array(dtype=Any),
+    x: Any,
     patch_start: wp.array(dtype=wp.int32),
     patch_vertices: wp.array(dtype=wp.int32),
     basis: wp.array2d(dtype=Any),
     t: int,
     row: int,
 ):
-    """x, x,1, x,2, x,11, x,12, x,22 of triangle t's patch at basis row `row`.
+    """x, x,1, x,2, x,11, x,12, x,22 of triangle t's patch at basis row `row` (`x`: the positions, an array
+    indexed by `patch_vertices`, or a block's staged positions, a shared tile indexed by its local table).
 
     Sums run over positions relative to the patch's first vertex (exact, since the basis is a
     partition of unity): derivatives then cancel at the patch's scale, not the shell's, which

@@ -113,7 +113,7 @@ def material_stress(strain: Any, inv: Any, nu: Any):
 
 @wp.func
 def koiter_jet(
-    x: wp.array(dtype=Any),
+    x: Any,
     patch_start: wp.array(dtype=wp.int32),
     patch_vertices: wp.array(dtype=wp.int32),
     basis: wp.array2d(dtype=Any),
@@ -192,7 +192,7 @@ def koiter_gradient_jet(
 
 @wp.func
 def point_gradient_jet(
-    x: wp.array(dtype=Any),
+    x: Any,
     patch_start: wp.array(dtype=wp.int32),
     patch_vertices: wp.array(dtype=wp.int32),
     basis: wp.array2d(dtype=Any),
@@ -229,6 +229,48 @@ def point_gradient_jet(
     return scale * j * n, g1 + scale * wp.cross(x2, r), g2 + scale * wp.cross(r, x1), g11, g12, g22
 
 
+@wp.func
+def triangle_forces(
+    x: Any,
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    points_per_triangle: int,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+    stretching: Any,
+    bending: Any,
+    nu: Any,
+    weights: wp.array(dtype=Any),
+    centroid: Any,
+    pressure: wp.float64,
+    with_energy: int,
+    energy_density: wp.array(dtype=wp.float64),
+    t: int,
+):
+    """Triangle t's forces on its patch vertices, one row per patch entry (and its points' energy densities
+    with `with_energy`): each point's gradient jet contracted with the basis and summed over the points."""
+    size = patch_start[t + 1] - patch_start[t]
+    accumulated = wp.matrix(shape=(MAX_PATCH, 3), dtype=type(nu))  # one row per patch vertex
+    for point in range(points_per_triangle):
+        q = t * points_per_triangle + point
+        row = triangle_type[t] * points_per_triangle + point
+        g, g1, g2, g11, g12, g22 = point_gradient_jet(
+            x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
+            stretching, bending, nu, weights[point], centroid, pressure, with_energy, energy_density,
+        )  # fmt: skip
+        for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
+            if k < size:
+                b = basis[row, k]
+                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
+                for c in range(3):
+                    accumulated[k, c] = accumulated[k, c] - f[c]
+    return accumulated
+
+
 @wp.kernel
 def shell_forces_kernel(
     x: wp.array(dtype=Any),
@@ -255,9 +297,8 @@ def shell_forces_kernel(
 ):
     """One thread per triangle: the energy density at its points (`with_energy`) and the exact forces
     -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `moments` must hold the
-    volume moments; the x̄ part comes from `volume_centroid_force`). Each point's gradient jet is
-    summed over the points into per-vertex accumulators and added to `forces` with one atomic per
-    patch vertex."""
+    volume moments; the x̄ part comes from `volume_centroid_force`), added to `forces` with one atomic
+    per patch vertex."""
     t = wp.tid()
     start = patch_start[t]
     size = patch_start[t + 1] - start
@@ -265,21 +306,11 @@ def shell_forces_kernel(
     vertices = x.shape[0] // worlds
     centroid = type(x[0])(moments_centroid(moments[w], vertices))
     pressure = volume_pressure(moments[w], vertices, target[w], penalty[w])
-    stretching, bending = stretching_modulus[w], bending_modulus[w]
-    accumulated = wp.matrix(shape=(MAX_PATCH, 3), dtype=type(nu))  # one row per patch vertex
-    for point in range(points_per_triangle):
-        q = t * points_per_triangle + point
-        row = triangle_type[t] * points_per_triangle + point
-        g, g1, g2, g11, g12, g22 = point_gradient_jet(
-            x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
-            stretching, bending, nu, weights[point], centroid, pressure, with_energy, energy_density,
-        )  # fmt: skip
-        for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
-            if k < size:
-                b = basis[row, k]
-                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
-                for c in range(3):
-                    accumulated[k, c] = accumulated[k, c] - f[c]
+    accumulated = triangle_forces(
+        x, patch_start, patch_vertices, triangle_type, basis, points_per_triangle, ref_metric, ref_metric_inv,
+        ref_curvature, ref_weight, stretching_modulus[w], bending_modulus[w], nu, weights, centroid, pressure,
+        with_energy, energy_density, t,
+    )  # fmt: skip
     for k in range(wp.static(MAX_PATCH)):
         if k < size:
             force = type(x[0])(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2])

@@ -113,6 +113,73 @@ def test_one_backward_pulse_fails_the_forward_claim(tmp_path):
     assert result["claims"]["forward"] is False
 
 
+def test_two_backward_twins_fail_the_prism_claim_whatever_their_ratio(tmp_path):
+    """Both twins crawl back over the pulses they share, the sensitive one 3× as far: the ratio is 3, the
+    claim (the sensitive prism more than twice as fast along the wave) fails. The sensitive twin's extra
+    third pulse makes its whole-run mean forward."""
+    with open(tmp_path / "overdamped-implicit-coulomb-body_prism-walker.csv", "w", newline="") as f:
+        f.write("point,sensitive,seed,status,period,speed_R_per_T,pulse_displacements_R_1,pulse_displacements_R_2,"
+                "pulse_displacements_R_3\n"
+                "a,true,0,done,260,0.001,0.001,-0.007,0.009\na,true,1,done,260,0.001,0.0012,-0.0072,0.009\n"
+                "b,false,0,done,280,-0.001,0.001,-0.003,\nb,false,1,done,280,-0.001,0.0011,-0.0031,\n")
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    result = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb-body"]
+    cell = result["scenes"]["prism-walker"]
+    s = np.mean([(0.001 - 0.007) / 2 / 260, (0.0012 - 0.0072) / 2 / 260])
+    i = np.mean([(0.001 - 0.003) / 2 / 280, (0.0011 - 0.0031) / 2 / 280])
+    assert cell["compared_speeds"] == pytest.approx([s, i], rel=1e-12) and cell["speed_ratio"] > 2
+    assert cell["sensitive"]["mean"] > 0 and result["claims"]["prism_ratio_above_2"] is False
+
+
+def test_footings_that_disagree_leave_the_sphere_claim_undecided(tmp_path):
+    """Pulse for pulse the sensitive sphere is slower; in the same time it goes further (its start-up and
+    its extra pulse): the gait is still changing over the run, and the claim is left open."""
+    rows = {True: [(0.020, 0.004, 0.005), (0.021, 0.0041, 0.0052), (0.019, 0.0039, 0.0049)],
+            False: [(0.012, 0.005, 0.006), (0.013, 0.0052, 0.0061), (0.011, 0.0049, 0.0058)]}  # fmt: skip
+    with open(tmp_path / "overdamped-implicit-coulomb_sphere-walker.csv", "w", newline="") as f:
+        f.write("point,sensitive,seed,status,time,period,speed_R_per_T,distance_R,pulse_displacements_R_1,"
+                "pulse_displacements_R_2\n")
+        for flag, twin in rows.items():
+            for seed, (distance, first, second) in enumerate(twin):
+                f.write(f"p,{str(flag).lower()},{seed},done,1104,270,{(first + second) / 2},{distance},{first},{second}\n")
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    result = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb"]
+    cell = result["scenes"]["sphere-walker"]
+    s, i = np.array([r[0] for r in rows[True]]), np.array([r[0] for r in rows[False]])
+    assert cell["distance_ratio"] == pytest.approx(s.mean() / i.mean(), rel=1e-12)
+    error = math.hypot(s.std(ddof=1), i.std(ddof=1)) / math.sqrt(3)
+    assert cell["distance_separation"] == pytest.approx((s.mean() - i.mean()) / error, rel=1e-12)
+    assert cell["separation"] < -2 and result["claims"]["sensitive_sphere_faster"] is None
+
+
+def test_late_pulses_decide_the_sphere_claim_once_the_start_up_is_left_out(tmp_path):
+    """A long run whose first two pulses favour the insensitive twin and whose later ones the sensitive:
+    with --skip-pulses 2 the twins are compared over pulses 3 to 5 alone, and too few pulses is an error."""
+    sensitive = {0: [4e-4, 4e-4, 9e-4, 9.2e-4, 9.1e-4], 1: [4.1e-4, 4e-4, 9.1e-4, 9e-4, 9.3e-4]}
+    insensitive = {0: [6e-4, 6e-4, 7e-4, 7.1e-4, 6.9e-4], 1: [6.1e-4, 5.9e-4, 7.1e-4, 7e-4, 7.2e-4]}
+    with open(tmp_path / "overdamped-implicit-coulomb_sphere-walker.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "time", "period", "distance_R",
+                                               "speed_R_per_T", *(f"pulse_displacements_R_{k}" for k in range(1, 6))])  # fmt: skip
+        writer.writeheader()
+        for flag, twin in ((True, sensitive), (False, insensitive)):
+            for seed, pulses in twin.items():
+                writer.writerow({"point": f"s{flag}{seed}", "sensitive": str(flag).lower(), "seed": seed,
+                                 "status": "done", "time": 3300, "period": 268.0 if flag else 278.0,
+                                 "distance_R": 0.001, "speed_R_per_T": np.mean(pulses),
+                                 **{f"pulse_displacements_R_{k}": v for k, v in enumerate(pulses, 1)}})  # fmt: skip
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up",
+                "--skip-pulses", "2"]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "walker_regimes.json").read_text())
+    cell = result["regimes"]["overdamped-implicit-coulomb"]["scenes"]["sphere-walker"]
+    s = np.array([np.mean(p[2:]) / 268.0 for p in sensitive.values()])
+    i = np.array([np.mean(p[2:]) / 278.0 for p in insensitive.values()])
+    assert result["skip_pulses"] == 2 and cell["compared"] == "pulses 3 to 5 of every seed, per unit time"
+    assert cell["speed_ratio"] == pytest.approx(s.mean() / i.mean(), rel=1e-12) and "distances" not in cell
+    assert result["regimes"]["overdamped-implicit-coulomb"]["claims"]["sensitive_sphere_faster"] is True
+    with pytest.raises(SystemExit):
+        cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up", "--skip-pulses", "5"])
+
+
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
     with pytest.raises(SystemExit):
         cli(["bench", "walker_regimes", "--tables", str(tmp_path)])

@@ -95,6 +95,38 @@ class PatchTables:
         }
 
 
+@dataclass(frozen=True)
+class BlockUnions:
+    """The patch vertices of `block` consecutive triangles gathered once per block (a thread block stages
+    them in shared memory, docs/theory/geometry.md#staging-patches-in-shared-memory)."""
+
+    block: int  # triangles per block
+    capacity: int  # vertices per block's row, padded with the row's first vertex
+    block_vertices: np.ndarray  # (n_blocks, capacity) int32: the union of the block's patches, sorted
+    patch_local: np.ndarray  # like patch_vertices: each entry's position in its block's row
+
+
+def block_unions(tables: PatchTables, block: int, multiple: int = 32) -> BlockUnions:
+    """Each `block` consecutive triangles' union of patch vertices, its row padded to a common capacity
+    (the largest union rounded up to `multiple`), and every patch entry's position in its row."""
+    if block < 1:
+        raise ValueError(f"block = {block}: the triangles per block must be at least 1")
+    block_of_entry = np.repeat(np.arange(tables.n_triangles) // block, np.diff(tables.patch_start))
+    n_vertices = int(tables.patch_vertices.max()) + 1
+    keys = block_of_entry.astype(np.int64) * n_vertices + tables.patch_vertices
+    union, local_key = np.unique(keys, return_inverse=True)
+    union_block = union // n_vertices
+    n_blocks = (tables.n_triangles + block - 1) // block
+    counts = np.bincount(union_block, minlength=n_blocks)
+    first = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    capacity = int(-(-counts.max() // multiple) * multiple)
+    rows = np.repeat((union % n_vertices)[first], capacity).reshape(n_blocks, capacity)
+    rows[union_block, np.arange(len(union)) - first[union_block]] = union % n_vertices
+    local = np.arange(len(union)) - first[union_block]
+    return BlockUnions(block=block, capacity=capacity, block_vertices=rows.astype(np.int32),
+                       patch_local=local[local_key].astype(np.int32))  # fmt: skip
+
+
 def build_patch_tables(triangles: np.ndarray, n_vertices: int, rule: str = "3") -> PatchTables:
     """Tables for a closed mesh; each triangle may touch at most one extraordinary vertex."""
     tri = np.asarray(triangles, dtype=np.int64)

@@ -23,6 +23,7 @@ from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.reduce import REDUCTION_BLOCK
+from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
     MAX_PATCH,
     VolumeMoments,
@@ -40,6 +41,7 @@ from .kernels.shell import (
     volume_terms_kernel,
 )
 from .mesh import Mesh
+from .patches import block_unions
 from .relax import NEWTON_STEPS, relax
 from .self_contact import SelfContact
 
@@ -94,7 +96,9 @@ class Shell:
     couplings; volume_penalty μV; model "koiter" or "bilayer" (bilayer_radius R sets
     A = (AC/2 - AI)/R, default the radius of the sphere with the rest area); rule the quadrature;
     gradient "analytic" or "autodiff"; deterministic=True sums forces in a fixed order (None: as
-    `wavewarp.device.set_deterministic` chose).
+    `wavewarp.device.set_deterministic` chose); staged_block=B stages each B consecutive triangles' patch
+    vertices in shared memory for the force kernel (one global read and atomic per vertex and block;
+    CUDA, B = 1 on the CPU, where Warp runs a tile kernel's block as one lane).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -102,7 +106,7 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 device=None, dtype="float32"):  # fmt: skip
+                 staged_block=None, device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
@@ -167,6 +171,8 @@ class Shell:
             self._forces = wp.zeros(mesh.n_vertices, dtype=self.vec3)
             if self.deterministic:
                 self._jets = wp.zeros((n_q, 6), dtype=self.vec3)
+        self.staged_block = staged_block
+        self._staged = None if staged_block is None else self._staged_tables(staged_block)
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -191,9 +197,26 @@ class Shell:
         float32 shell works on its float64 twin. Self-contact is not copied."""
         twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
-                     bilayer_radius=self._bilayer_radius, device=self.device, dtype=dtype)  # fmt: skip
+                     bilayer_radius=self._bilayer_radius, staged_block=self.staged_block, device=self.device,
+                     dtype=dtype)  # fmt: skip
         twin.rest_volume = self.rest_volume
         return twin
+
+    def _staged_tables(self, block) -> dict:
+        """The staged force kernel's launch: its kernel, blocks, per-block vertex unions and local patch table."""
+        if isinstance(block, bool) or not isinstance(block, (int, np.integer)) or block < 1:
+            raise ValueError(f"staged_block must be a whole number of triangles per block >= 1, got {block!r}")
+        if self.device.is_cpu and block != 1:
+            raise ValueError(f"staged_block = {block} on the CPU: Warp runs a tile kernel's block as one lane there; "
+                             "use staged_block=1 (or run on CUDA)")  # fmt: skip
+        if self.deterministic:
+            raise ValueError("staged_block adds forces with atomics; deterministic=True gathers them in a fixed order: "
+                             "choose one")  # fmt: skip
+        unions = block_unions(self.tables.host, int(block), multiple=1 if block == 1 else 32)
+        with wp.ScopedDevice(self.device):
+            return dict(kernel=staged_shell_forces_kernel(unions.capacity), block=int(block),
+                        blocks=len(unions.block_vertices), patch_local=wp.array(unions.patch_local, dtype=wp.int32),
+                        block_vertices=wp.array(unions.block_vertices, dtype=wp.int32))  # fmt: skip
 
     def listen(self, notify) -> None:
         """Call `notify()` (a bound method, held weakly) whenever V̄ or the set of terms changes: the
@@ -329,7 +352,13 @@ class Shell:
         elif not self.deterministic:
             forces.zero_()  # the atomic scatter adds; the deterministic gather writes
         inputs = self._elastic_inputs(x, moduli) + [t.weights, *volume, int(energy is not None)]
-        if not self.deterministic:
+        if self._staged is not None:
+            staged = self._staged
+            inputs[2] = staged["patch_local"]
+            wp.launch_tiled(staged["kernel"], dim=[staged["blocks"]], block_dim=staged["block"],
+                            inputs=inputs + [self._energy_density, staged["block_vertices"], forces],
+                            device=self.device)  # fmt: skip
+        elif not self.deterministic:
             wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles, inputs=inputs,
                       outputs=[self._energy_density, forces], device=self.device)  # fmt: skip
         else:
