@@ -3,6 +3,7 @@
 import warp as wp
 
 SCALARS = (wp.float32, wp.float64)
+BUILT_ON_DEMAND = ("staged",)  # modules whose kernels are made when first asked for, one per compile-time tile shape
 
 
 def _element(role: str, scalar):

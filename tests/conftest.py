@@ -32,7 +32,7 @@ def rng():
 
 COMPILE_GROUPS = (("contact", "laplace", "newton", "reduce"),
                   ("shell", "relax", "waves", "dynamics", "limit_surface", "self_contact"))  # about 25 s and 32 s;
-# a kernel module named in neither is compiled with the first group
+# a kernel module named in neither is compiled with the first group (those built on demand compile on first use)
 
 
 def pytest_sessionstart(session):
@@ -45,7 +45,8 @@ def pytest_sessionstart(session):
                    "[wp.load_module(importlib.import_module('wavewarp.kernels.' + name), device='cpu') "
                    "for name in sys.argv[1:]]")  # fmt: skip
     named = {name for group in COMPILE_GROUPS for name in group}
-    others = tuple(m.name for m in pkgutil.iter_modules(kernels.__path__) if m.name not in named)
+    others = tuple(m.name for m in pkgutil.iter_modules(kernels.__path__)
+                   if m.name not in named and m.name not in kernels.BUILT_ON_DEMAND)  # fmt: skip
     groups = (COMPILE_GROUPS[0] + others, *COMPILE_GROUPS[1:])
     jobs = [subprocess.Popen([sys.executable, "-c", compile_one, *group], stdout=subprocess.DEVNULL) for group in groups]
     for job in jobs:
