@@ -205,9 +205,11 @@ def claims(scenes: dict) -> dict:
 
 
 def prism_faster_twice(cell: dict) -> bool:
-    """Claim 3 on the twins' compared speeds (`compared`, else whole runs): both move forward and the sensitive
-    twin more than twice as fast (a ratio of two backward speeds is no claim)."""
-    sensitive, insensitive = cell["compared_speeds"] or (cell["sensitive"]["mean"], cell["insensitive"]["mean"] or 0.0)
+    """Claim 3 on the twins' compared speeds (`compared`): both move forward and the sensitive twin more than
+    twice as fast (a ratio of two backward speeds is no claim)."""
+    if cell["compared_speeds"] is None:  # a twin without a whole period
+        return False
+    sensitive, insensitive = cell["compared_speeds"]
     return bool(sensitive > 0 and insensitive > 0 and sensitive > 2 * insensitive)
 
 

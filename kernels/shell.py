@@ -303,9 +303,7 @@ def shell_forces_kernel(
     start = patch_start[t]
     size = patch_start[t + 1] - start
     w = t // (triangle_type.shape[0] // worlds)
-    vertices = x.shape[0] // worlds
-    centroid = type(x[0])(moments_centroid(moments[w], vertices))
-    pressure = volume_pressure(moments[w], vertices, target[w], penalty[w])
+    centroid, pressure = world_volume_terms(x, moments, target, penalty, worlds, w)
     accumulated = triangle_forces(
         x, patch_start, patch_vertices, triangle_type, basis, points_per_triangle, ref_metric, ref_metric_inv,
         ref_curvature, ref_weight, stretching_modulus[w], bending_modulus[w], nu, weights, centroid, pressure,
@@ -345,10 +343,8 @@ def shell_force_jets_kernel(
     `jets` for the deterministic `gather_forces_kernel` (no atomics)."""
     q = wp.tid()
     w = q // (ref_weight.shape[0] // worlds)
-    vertices = x.shape[0] // worlds
     t, row = basis_row(triangle_type, points_per_triangle, q)
-    centroid = type(x[0])(moments_centroid(moments[w], vertices))
-    pressure = volume_pressure(moments[w], vertices, target[w], penalty[w])
+    centroid, pressure = world_volume_terms(x, moments, target, penalty, worlds, w)
     g, g1, g2, g11, g12, g22 = point_gradient_jet(
         x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
         stretching_modulus[w], bending_modulus[w], nu, weights[q % points_per_triangle], centroid, pressure,
@@ -390,6 +386,15 @@ def volume_about_centroid(m: VolumeMoments, n_vertices: int):
 def volume_pressure(m: VolumeMoments, n_vertices: int, target: wp.float64, penalty: wp.float64):
     """⅔ μV (V - V̄), the factor of the volume term's point jets."""
     return wp.float64(2.0) / wp.float64(3.0) * penalty * (volume_about_centroid(m, n_vertices) - target)
+
+
+@wp.func
+def world_volume_terms(x: wp.array(dtype=Any), moments: wp.array(dtype=VolumeMoments),
+                       target: wp.array(dtype=wp.float64), penalty: wp.array(dtype=wp.float64), worlds: int, w: int):
+    """World w's centroid x̄ (in x's type) and `volume_pressure`, shared by every point of the world."""
+    vertices = x.shape[0] // worlds
+    centroid = type(x[0])(moments_centroid(moments[w], vertices))
+    return centroid, volume_pressure(moments[w], vertices, target[w], penalty[w])
 
 
 @wp.func

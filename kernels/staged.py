@@ -15,7 +15,7 @@ from typing import Any
 
 import warp as wp
 
-from .shell import MAX_PATCH, VolumeMoments, moments_centroid, triangle_forces, volume_pressure
+from .shell import MAX_PATCH, VolumeMoments, triangle_forces, world_volume_terms
 
 
 @functools.cache
@@ -64,9 +64,7 @@ def staged_shell_forces_kernel(capacity: int):
             start = patch_start[t]
             size = patch_start[t + 1] - start
             w = t // (n_triangles // worlds)
-            vertices = x.shape[0] // worlds
-            centroid = type(x[0])(moments_centroid(moments[w], vertices))
-            pressure = volume_pressure(moments[w], vertices, target[w], penalty[w])
+            centroid, pressure = world_volume_terms(x, moments, target, penalty, worlds, w)
             accumulated = triangle_forces(
                 positions, patch_start, patch_local, triangle_type, basis, points_per_triangle, ref_metric,
                 ref_metric_inv, ref_curvature, ref_weight, stretching_modulus[w], bending_modulus[w], nu, weights,

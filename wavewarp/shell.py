@@ -214,7 +214,7 @@ class Shell:
                              "choose one")  # fmt: skip
         unions = block_unions(self.tables.host, int(block), multiple=1 if block == 1 else 32)
         with wp.ScopedDevice(self.device):
-            return dict(kernel=staged_shell_forces_kernel(unions.capacity), block=int(block),
+            return dict(kernel=staged_shell_forces_kernel(unions.capacity), block=unions.block,
                         blocks=len(unions.block_vertices), patch_local=wp.array(unions.patch_local, dtype=wp.int32),
                         block_vertices=wp.array(unions.block_vertices, dtype=wp.int32))  # fmt: skip
 
@@ -354,7 +354,7 @@ class Shell:
         inputs = self._elastic_inputs(x, moduli) + [t.weights, *volume, int(energy is not None)]
         if self._staged is not None:
             staged = self._staged
-            inputs[2] = staged["patch_local"]
+            inputs[2] = staged["patch_local"]  # in place of patch_vertices: each entry's place in its block's union
             wp.launch_tiled(staged["kernel"], dim=[staged["blocks"]], block_dim=staged["block"],
                             inputs=inputs + [self._energy_density, staged["block_vertices"], forces],
                             device=self.device)  # fmt: skip
