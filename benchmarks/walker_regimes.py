@@ -16,9 +16,11 @@ speed per unit time over the first pulses every seed of both twins has where the
 else the whole runs' per-pulse speeds; its spread from the two standard errors), the ratio of the whole
 runs' distances in the same time (start-up and last unfinished pulse included) and the period ratio; and
 the paper's three claims — every twin moves along the wave (every pulse, where the tables list them), the
-sensitive sphere is faster (by more than two standard errors on both footings; undecided, null, where
-they disagree — a gait still changing over the run — or with one seed a twin), the sensitive prism is
-more than twice as fast as its twin with both moving forward — and
+sensitive sphere is faster (by more than two standard errors on every footing: the compared pulses and
+the same-time distances, or with --skip-pulses the compared pulses and each half of them; undecided,
+null, where they disagree — a gait still changing over the run — or with one seed a twin), the
+sensitive prism is more than twice as fast as its twin with both moving forward (with --skip-pulses on
+the compared pulses and on each half; undecided where they disagree) — and
 OUT/walker_regimes.png.
 """
 
@@ -128,25 +130,30 @@ def twin(rows: list, sensitive: bool) -> dict:
             "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R")}  # fmt: skip
 
 
-def compared(rows: list, skip: int = 0) -> tuple:
+def compared(rows: list, skip: int = 0, window=None) -> tuple:
     """The twins' per-seed speeds (sensitive, insensitive) on one footing, and its name. The sensitive twin's
     shorter period gives it more whole pulses in the same run, and pulses differ (the first is often the
     largest): where the tables list the pulses, each seed's speed is its mean over its pulses skip + 1 to k,
     k the fewest any seed of either twin has, per unit time (÷ its period); else the whole runs' per-pulse
-    speeds. `skip` leaves out the gait's start-up."""
+    speeds. `skip` leaves out the gait's start-up; `window(skip, k)` -> (first, last), 0-based and
+    exclusive, picks a part of those pulses instead."""
     sensitive, insensitive = seeds_of(rows, True), seeds_of(rows, False)
     k = min((len(pulses(r)) for r in sensitive + insensitive), default=0)
     if 0 < k <= skip:
         raise ValueError(f"--skip-pulses {skip}: some seed has only {k} whole pulse(s); run more periods")
+    first, last = window(skip, k) if window and k else (skip, k)
 
     def speeds(chosen):
         if k == 0:
             return [float(r["speed_R_per_T"]) for r in chosen]
-        return [float(np.mean(pulses(r)[skip:k])) / float(r["period"]) for r in chosen]
+        return [float(np.mean(pulses(r)[first:last])) / float(r["period"]) for r in chosen]
 
-    footing = (f"pulses {skip + 1} to {k} of every seed, per unit time" if skip else
-               f"first {k} pulse(s) of every seed, per unit time") if k else "whole runs, per pulse"  # fmt: skip
+    footing = (f"pulses {first + 1} to {last} of every seed, per unit time" if first else
+               f"first {last} pulse(s) of every seed, per unit time") if k else "whole runs, per pulse"  # fmt: skip
     return speeds(sensitive), speeds(insensitive), footing
+
+
+HALVES = (lambda skip, k: (skip, (skip + k) // 2), lambda skip, k: ((skip + k) // 2, k))  # earlier, later pulses
 
 
 def mean_and_error(values: list) -> tuple:
@@ -157,20 +164,37 @@ def mean_and_error(values: list) -> tuple:
 def twins(rows: list, skip: int = 0) -> dict:
     """Both twins, and the speed ratio sensitive / insensitive (on the footing of `compared`) with its
     first-order spread, the period ratio and (without `skip`, whose point is to leave the start-up out)
-    the whole runs' `distances`."""
+    the whole runs' `distances`; with `skip`, the same comparison on each half of the compared pulses
+    (`halves`: a gait still changing shows there)."""
     s, i = twin(rows, True), twin(rows, False)
     cell = {"sensitive": s, "insensitive": i, "compared": None, "compared_speeds": None, "speed_ratio": None,
             "speed_ratio_spread": None, "period_ratio": None, "separation": None}  # fmt: skip
     if s["n"] and i["n"]:
         sensitive, insensitive, cell["compared"] = compared(rows, skip)
-        (ms, es), (mi, ei) = mean_and_error(sensitive), mean_and_error(insensitive)
-        cell.update(compared_speeds=[ms, mi], period_ratio=s["period"] / i["period"],
-                    separation=(ms - mi) / math.hypot(es, ei) if es or ei else None)  # fmt: skip
-        if ms != 0 and mi != 0:
-            ratio = ms / mi
-            cell.update(speed_ratio=ratio, speed_ratio_spread=abs(ratio) * math.hypot(es / ms, ei / mi))
-        cell.update(distances(rows) if not skip else {})
+        cell.update(comparison(sensitive, insensitive), period_ratio=s["period"] / i["period"])
+        cell.update(distances(rows) if not skip else {"halves": halves(rows, skip)})
     return cell
+
+
+def comparison(sensitive: list, insensitive: list) -> dict:
+    """Means, their separation in standard errors and their ratio with its first-order spread."""
+    (ms, es), (mi, ei) = mean_and_error(sensitive), mean_and_error(insensitive)
+    ratio = ms / mi if ms != 0 and mi != 0 else None
+    return {"compared_speeds": [ms, mi], "separation": (ms - mi) / math.hypot(es, ei) if es or ei else None,
+            "speed_ratio": ratio, "speed_ratio_spread": abs(ratio) * math.hypot(es / ms, ei / mi) if ratio else None}
+
+
+def halves(rows: list, skip: int) -> list:
+    """`comparison` of the twins over the earlier and the later half of the compared pulses (none where they
+    are fewer than two)."""
+    k = min(len(pulses(r)) for r in seeds_of(rows, True) + seeds_of(rows, False))
+    if k - skip < 2:
+        return []
+    out = []
+    for window in HALVES:
+        sensitive, insensitive, footing = compared(rows, skip, window)
+        out.append({"compared": footing, **comparison(sensitive, insensitive)})
+    return out
 
 
 def distances(rows: list) -> dict:
@@ -187,10 +211,11 @@ def distances(rows: list) -> dict:
 
 def claims(scenes: dict) -> dict:
     """The paper's claims for one regime (None where a scene is missing)."""
-    def separated(cell):  # None with fewer than two seeds a twin, or where the two footings disagree
+    def separated(cell):  # None with fewer than two seeds a twin, or where the footings disagree
         if min(cell["sensitive"]["n"], cell["insensitive"]["n"]) < 2:
             return None
-        footings = ((cell["compared_speeds"], cell["separation"]), (cell.get("distances"), cell.get("distance_separation")))
+        footings = ((cell["compared_speeds"], cell["separation"]), (cell.get("distances"), cell.get("distance_separation")),
+                    *((half["compared_speeds"], half["separation"]) for half in cell.get("halves", ())))  # fmt: skip
         verdicts = {means[0] > 0 and sep > 2 for means, sep in footings if sep is not None}  # faster along the wave
         return verdicts.pop() if len(verdicts) == 1 else None
 
@@ -204,13 +229,15 @@ def claims(scenes: dict) -> dict:
             "prism_ratio_above_2": prism_faster_twice(prism) if prism and prism["sensitive"]["n"] else None}  # fmt: skip
 
 
-def prism_faster_twice(cell: dict) -> bool:
+def prism_faster_twice(cell: dict) -> bool | None:
     """Claim 3 on the twins' compared speeds (`compared`): both move forward and the sensitive twin more than
-    twice as fast (a ratio of two backward speeds is no claim)."""
+    twice as fast (a ratio of two backward speeds is no claim); undecided (None) where the halves of the
+    compared pulses disagree."""
     if cell["compared_speeds"] is None:  # a twin without a whole period
         return False
-    sensitive, insensitive = cell["compared_speeds"]
-    return bool(sensitive > 0 and insensitive > 0 and sensitive > 2 * insensitive)
+    verdicts = {bool(s > 0 and i > 0 and s > 2 * i)
+                for s, i in (cell["compared_speeds"], *(half["compared_speeds"] for half in cell.get("halves", ())))}
+    return verdicts.pop() if len(verdicts) == 1 else None
 
 
 def summary(tables: dict, skip: int = 0) -> dict:

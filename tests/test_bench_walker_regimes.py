@@ -152,14 +152,12 @@ def test_footings_that_disagree_leave_the_sphere_claim_undecided(tmp_path):
     assert cell["separation"] < -2 and result["claims"]["sensitive_sphere_faster"] is None
 
 
-def test_late_pulses_decide_the_sphere_claim_once_the_start_up_is_left_out(tmp_path):
-    """A long run whose first two pulses favour the insensitive twin and whose later ones the sensitive:
-    with --skip-pulses 2 the twins are compared over pulses 3 to 5 alone, and too few pulses is an error."""
-    sensitive = {0: [4e-4, 4e-4, 9e-4, 9.2e-4, 9.1e-4], 1: [4.1e-4, 4e-4, 9.1e-4, 9e-4, 9.3e-4]}
-    insensitive = {0: [6e-4, 6e-4, 7e-4, 7.1e-4, 6.9e-4], 1: [6.1e-4, 5.9e-4, 7.1e-4, 7e-4, 7.2e-4]}
-    with open(tmp_path / "overdamped-implicit-coulomb_sphere-walker.csv", "w", newline="") as f:
+def write_pulses(path, sensitive: dict, insensitive: dict) -> None:
+    """A made-up table of long runs: {seed: per-pulse displacements} a twin, periods 268 and 278."""
+    count = len(next(iter(sensitive.values())))
+    with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "time", "period", "distance_R",
-                                               "speed_R_per_T", *(f"pulse_displacements_R_{k}" for k in range(1, 6))])  # fmt: skip
+                                               "speed_R_per_T", *(f"pulse_displacements_R_{k}" for k in range(1, count + 1))])  # fmt: skip
         writer.writeheader()
         for flag, twin in ((True, sensitive), (False, insensitive)):
             for seed, pulses in twin.items():
@@ -167,6 +165,14 @@ def test_late_pulses_decide_the_sphere_claim_once_the_start_up_is_left_out(tmp_p
                                  "status": "done", "time": 3300, "period": 268.0 if flag else 278.0,
                                  "distance_R": 0.001, "speed_R_per_T": np.mean(pulses),
                                  **{f"pulse_displacements_R_{k}": v for k, v in enumerate(pulses, 1)}})  # fmt: skip
+
+
+def test_late_pulses_decide_the_sphere_claim_once_the_start_up_is_left_out(tmp_path):
+    """A long run whose first two pulses favour the insensitive twin and whose later ones the sensitive:
+    with --skip-pulses 2 the twins are compared over pulses 3 to 5 alone, and too few pulses is an error."""
+    sensitive = {0: [4e-4, 4e-4, 9e-4, 9.2e-4, 9.1e-4], 1: [4.1e-4, 4e-4, 9.1e-4, 9e-4, 9.3e-4]}
+    insensitive = {0: [6e-4, 6e-4, 7e-4, 7.1e-4, 6.9e-4], 1: [6.1e-4, 5.9e-4, 7.1e-4, 7e-4, 7.2e-4]}
+    write_pulses(tmp_path / "overdamped-implicit-coulomb_sphere-walker.csv", sensitive, insensitive)
     assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up",
                 "--skip-pulses", "2"]) == 0  # fmt: skip
     result = json.loads((tmp_path / "walker_regimes.json").read_text())
@@ -178,6 +184,28 @@ def test_late_pulses_decide_the_sphere_claim_once_the_start_up_is_left_out(tmp_p
     assert result["regimes"]["overdamped-implicit-coulomb"]["claims"]["sensitive_sphere_faster"] is True
     with pytest.raises(SystemExit):
         cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up", "--skip-pulses", "5"])
+
+
+def test_halves_of_the_compared_pulses_that_disagree_leave_the_claims_undecided(tmp_path):
+    """After the start-up (pulse 1) the sensitive sphere leads over pulses 2-3 and trails over 4-5; the sensitive
+    prism is 1.5× as fast over pulses 2-3 and 5× over 4-5, 2.6× over all four: each claim is undecided."""
+    write_pulses(tmp_path / "overdamped-implicit-coulomb_sphere-walker.csv",
+                 {0: [1e-3, 9e-4, 9.1e-4, 6e-4, 6.1e-4], 1: [1e-3, 9.2e-4, 9e-4, 6.2e-4, 6.1e-4]},
+                 {0: [1e-3, 7e-4, 7.1e-4, 8e-4, 8.1e-4], 1: [1e-3, 7.1e-4, 7.2e-4, 8.2e-4, 8.1e-4]})  # fmt: skip
+    write_pulses(tmp_path / "overdamped-implicit-coulomb_prism-walker.csv",
+                 {0: [1e-4, 3e-4, 3e-4, 5e-4, 5e-4], 1: [1e-4, 3.1e-4, 2.9e-4, 5.1e-4, 4.9e-4]},
+                 {0: [1e-4, 2e-4, 2e-4, 1e-4, 1e-4], 1: [1e-4, 2.1e-4, 1.9e-4, 1.1e-4, 0.9e-4]})  # fmt: skip
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up",
+                "--skip-pulses", "1"]) == 0  # fmt: skip
+    regime = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb"]
+    sphere, prism = regime["scenes"]["sphere-walker"], regime["scenes"]["prism-walker"]
+    assert [h["compared"] for h in sphere["halves"]] == ["pulses 2 to 3 of every seed, per unit time",
+                                                          "pulses 4 to 5 of every seed, per unit time"]  # fmt: skip
+    assert sphere["halves"][0]["separation"] > 2 and sphere["halves"][1]["separation"] < -2
+    assert sphere["separation"] > 2 and regime["claims"]["sensitive_sphere_faster"] is None
+    ratios = [prism["speed_ratio"], *(h["speed_ratio"] for h in prism["halves"])]
+    assert ratios == pytest.approx([4.0 / 268 / (1.5 / 278), 3.0 / 268 / (2.0 / 278), 5.0 / 268 / (1.0 / 278)], rel=1e-9)
+    assert regime["claims"]["prism_ratio_above_2"] is None
 
 
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):

@@ -22,8 +22,11 @@ from wavewarp import cli, kernels, walker
 from wavewarp.device import deterministic_default, set_deterministic
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import SceneError, load_scene, resolve
-from wavewarp.sweep import (LISTED_COLUMNS, Point, SweepSpec, batches, grid_points, measurement_columns, merge_kernel_cache,
-                            parse_grid, sweep)
+from distributed import Client, KilledWorker
+from distributed.system import MEMORY_LIMIT
+
+from wavewarp.sweep import (LISTED_COLUMNS, Point, SweepSpec, batches, grid_points, local_cluster, measurement_columns,
+                            merge_kernel_cache, parse_grid, sweep)
 
 QUICK_CUBE = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True, device="cpu")
 
@@ -258,6 +261,31 @@ def test_walker_seeds_perturb_the_rest_shape(monkeypatch):
     first, second = (mesh.vertices - sphere.vertices for mesh in built[:2])
     assert 0.5e-3 < np.std(first) / noisy.radius < 2e-3 and not np.allclose(first, second)
     assert np.array_equal(built[2].vertices, sphere.vertices)
+
+
+class DyingExecutor(CountingExecutor):
+    """Runs the first batch; the worker of every later one dies (as Dask reports it)."""
+
+    def submit(self, function, spec, points, out):
+        if self.points == 0:
+            return super().submit(function, spec, points, out)
+        self.points += len(points)
+        future = concurrent.futures.Future()
+        future.set_exception(KilledWorker("run_batch-1", None, 3))
+        return future
+
+
+def test_a_batch_whose_worker_dies_is_named_with_the_fix_and_the_other_batches_finish(tmp_path):
+    with pytest.raises(RuntimeError, match=r"1 batch.*gamma=1\.0.* lost their worker .* run the same sweep again .*--batch"):
+        sweep(QUICK_CUBE, str(tmp_path), executor=DyingExecutor(), batch=2)
+    assert len([name for name in os.listdir(tmp_path / "points") if name.endswith(".json")]) == 2
+
+
+def test_a_local_clusters_workers_share_the_machines_memory():
+    """One worker gets all of it (Dask's default would give it memory × threads / cores)."""
+    with local_cluster("cpu", workers=1) as cluster, Client(cluster) as client:
+        limits = [w["memory_limit"] for w in client.scheduler_info()["workers"].values()]
+    assert limits == [MEMORY_LIMIT]
 
 
 def test_workers_kernels_are_merged_back_into_the_cache(tmp_path):

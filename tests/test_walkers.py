@@ -324,6 +324,32 @@ def test_walking_in_chunks_equals_walking_step_by_step():
     assert chunked.dynamics.time == pytest.approx(chunked.time, rel=1e-12)
 
 
+@pytest.mark.parametrize("steps, graph_steps, launches", [(10, None, [(10, 1)]), (10, 3, [(3, 3), (1, 1)]),
+                                                           (10, 5, [(5, 2)]), (2, 5, [(2, 1)]), (0, 4, [])])
+def test_a_chunk_is_made_of_graphs_of_at_most_graph_steps(steps, graph_steps, launches):
+    from wavewarp.device import graph_launches
+
+    assert graph_launches(steps, graph_steps) == launches
+    assert sum(length * repeats for length, repeats in launches) == steps
+
+
+def test_walking_in_small_graphs_equals_one_graph_a_chunk():
+    """Graphs of 3 coupled steps, launched 3 times and one of 1 step, replay the arithmetic of one
+    graph of the whole chunk of 10; a walker's graph holds about GRAPH_SUBSTEPS mechanics steps."""
+    from wavewarp.coupled import GRAPH_SUBSTEPS
+
+    small, whole = small_walking(check_every=10), small_walking(check_every=10)
+    assert small.runner.graph_steps == max(1, GRAPH_SUBSTEPS // small.substeps)
+    small.runner.graph_steps, whole.runner.graph_steps = 3, None
+    small.advance(10)
+    whole.advance(10)
+    assert sorted(small.runner._graphs) == [1, 3] and sorted(whole.runner._graphs) == [10]
+    for a, b in ((small.dynamics.x, whole.dynamics.x), (small.dynamics.v, whole.dynamics.v),
+                 (small.wave.c, whole.wave.c), (small.wave.w, whole.wave.w)):  # fmt: skip
+        assert np.array_equal(a.numpy(), b.numpy())
+    assert small.wave.steps == whole.wave.steps == 10
+
+
 def test_walking_blow_up_restores_the_chunk_start():
     """A speed past the limit inside a chunk raises BlowUpError naming the time; the state returns to
     where the chunk began (nothing half-stepped is kept) and the clocks do not move."""

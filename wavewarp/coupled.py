@@ -33,6 +33,8 @@ from .shell import Shell
 from .state import FIELDS, State
 from .waves import BlowUpError, TimeStepError, _Stepper
 
+GRAPH_SUBSTEPS = 256  # mechanics steps per captured graph of the walkers' coupled steps
+
 
 def _check_pair(shell: Shell, wave: _Stepper) -> None:
     if not isinstance(wave, _Stepper):
@@ -243,7 +245,8 @@ class Walking:
     4. `recorder()`, if given, launches device-only work (e.g. a trace row).
 
     `advance(steps)` runs guarded chunks of up to `check_every` coupled steps with no host round-trip
-    (one captured graph per chunk size). After each chunk the flags are read (NaN/Inf or runaway
+    (captured graphs of about `GRAPH_SUBSTEPS` mechanics steps, at least one coupled step: a graph's
+    host memory grows with its launches, ~10 KB each on CUDA). After each chunk the flags are read (NaN/Inf or runaway
     values of c, w, v: BlowUpError; the wave's period-2 flip-flop: OscillationError; state restored
     to the chunk's start); sensitive runs then re-check the wave's stability bound on the moved
     surface (TimeStepError, state restored, if the fixed dt now exceeds it).
@@ -274,7 +277,7 @@ class Walking:
         self.runner = GuardedRunner(self._step, protected=self._protected, check=self._check,
                                     reset=wave.solver.reset_checks, restore=self._restore, device=self.shell.device,
                                     modules=modules, capture=dynamics.capture and wave.capture,
-                                    check_every=check_every)  # fmt: skip
+                                    check_every=check_every, graph_steps=max(1, GRAPH_SUBSTEPS // self.substeps))  # fmt: skip
         self.shell.listen(self.notify_model_changed)
         self.stopped = {}  # batched worlds: world -> the error that stopped it
         self._frozen = {}  # world -> its protected arrays' share when it stopped

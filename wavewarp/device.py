@@ -146,21 +146,31 @@ def world_sums(values: wp.array, total: wp.array, worlds: int = 1, deterministic
               block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
 
 
-def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool) -> None:
-    """Call `step()` `steps` times on `device`; with `capture`, as one graph cached in `graphs` by
-    step count (`modules`: every kernel module a step launches, loaded first). A graph keeps the
-    launch arguments it was captured with: whoever changes them clears `graphs`."""
+def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool, graph_steps: int | None = None) -> None:
+    """Call `step()` `steps` times on `device`; with `capture`, as graphs of at most `graph_steps` steps
+    (None: one graph of all), each cached in `graphs` by its step count and launched as often as it
+    fits (`modules`: every kernel module a step launches, loaded first). A graph keeps the launch
+    arguments it was captured with: whoever changes them clears `graphs`."""
     with wp.ScopedDevice(device):
         if not capture:
             for _ in range(steps):
                 step()
             return
-        graph = graphs.get(steps)
-        if graph is None:
-            for module in modules:
-                wp.load_module(module, device=device)
-            with wp.ScopedCapture(device=device, force_module_load=False) as scope:
-                for _ in range(steps):
-                    step()
-            graph = graphs[steps] = scope.graph
-        wp.capture_launch(graph)
+        for length, repeats in graph_launches(steps, graph_steps):
+            graph = graphs.get(length)
+            if graph is None:
+                for module in modules:
+                    wp.load_module(module, device=device)
+                with wp.ScopedCapture(device=device, force_module_load=False) as scope:
+                    for _ in range(length):
+                        step()
+                graph = graphs[length] = scope.graph
+            for _ in range(repeats):
+                wp.capture_launch(graph)
+
+
+def graph_launches(steps: int, graph_steps: int | None) -> list:
+    """[(steps per graph, launches)] that make `steps` from graphs of at most `graph_steps` steps."""
+    size = steps if graph_steps is None else min(steps, graph_steps)
+    full, rest = divmod(steps, size) if size else (0, 0)
+    return [(length, repeats) for length, repeats in ((size, full), (rest, 1)) if length and repeats]

@@ -1,8 +1,9 @@
 """The guarded run of a step on the device: one loop for every solver and coupling.
 
 `GuardedRunner.run(steps)` calls a step function in chunks of at most `check_every` steps. Before
-a chunk it backs up the protected arrays and clears the flags (`reset`); the chunk runs as one
-captured graph (CUDA, or Warp's CPU graph; one per chunk length, dropped by `invalidate`); after it
+a chunk it backs up the protected arrays and clears the flags (`reset`); the chunk runs as captured
+graphs (CUDA, or Warp's CPU graph) of at most `graph_steps` steps (a graph's memory grows with the
+launches in it; one graph per length, dropped by `invalidate`); after it
 `check(chunk)` reads the flags and returns an exception or None. On an exception the arrays are
 restored, `restore()` re-derives what depends on them, and the exception is raised: no NaN is
 ever left in the state. The only host round-trip is the check, once per chunk.
@@ -33,14 +34,16 @@ class GuardedRunner:
     """Runs `step()` in guarded chunks. `protected()` lists the arrays to back up (called per chunk, so
     it may change); `reset()` clears the flags before a chunk; `check(chunk)` returns an exception or
     None after it; `restore()` runs after a failed chunk's arrays are put back; `modules` are the kernel
-    modules a step launches (loaded before capture)."""
+    modules a step launches (loaded before capture); `graph_steps` bounds the steps of one captured graph
+    (None: a whole chunk)."""
 
     def __init__(self, step, *, protected, check, device, modules, capture: bool, check_every: int = 100,
-                 reset=None, restore=None):  # fmt: skip
+                 reset=None, restore=None, graph_steps: int | None = None):  # fmt: skip
         self.step, self.protected, self.check = step, protected, check
         self.reset, self.restore = reset, restore
         self.device, self.modules, self.capture = device, tuple(modules), bool(capture)
         self.check_every = count("check_every", check_every, 1)
+        self.graph_steps = None if graph_steps is None else count("graph_steps", graph_steps, 1)
         self._graphs = {}
         self._backups = None
 
@@ -71,7 +74,7 @@ class GuardedRunner:
             if self.reset is not None:
                 self.reset()
             run_steps(self.step, chunk, device=self.device, graphs=self._graphs, modules=self.modules,
-                      capture=self.capture)  # fmt: skip
+                      capture=self.capture, graph_steps=self.graph_steps)  # fmt: skip
             failure = self.check(chunk)
             if failure is not None:
                 for backup, a in zip(self._backups, arrays):

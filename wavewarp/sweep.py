@@ -32,7 +32,8 @@ import time
 from dataclasses import dataclass, field, replace
 
 import warp as wp
-from distributed import Client, Nanny, Scheduler, SpecCluster
+from distributed import Client, KilledWorker, Nanny, Scheduler, SpecCluster
+from distributed.system import MEMORY_LIMIT
 from tqdm import tqdm
 
 from .batch import PER_WORLD
@@ -244,7 +245,9 @@ def prepare_folder(spec: SweepSpec, out: str) -> None:
 def local_cluster(device: str | None = None, workers: int | None = None, port: int = 0):
     """A Dask cluster on this machine: one single-threaded worker per GPU this process sees
     (CUDA_VISIBLE_DEVICES of the worker set to it) when CUDA is present and `device` is not "cpu",
-    else `workers` CPU workers (default: one per core); its scheduler on `port` (0: any free one).
+    else `workers` CPU workers (default: one per core), each allowed an equal share of this machine's
+    memory (Dask's default, memory / cores, stops a GPU worker of a many-core host long before the
+    memory runs out); its scheduler on `port` (0: any free one).
     Each worker has its own WARP_CACHE_PATH, seeded from this process's kernel cache, so that no
     cache is written by two processes; the kernels the workers compiled are copied back into it at
     the end, so the next cluster starts warm."""
@@ -259,7 +262,8 @@ def local_cluster(device: str | None = None, workers: int | None = None, port: i
     for k, cache in enumerate(caches):
         shutil.copytree(ours, os.path.join(cache, os.path.basename(ours)))
         env = {"WARP_CACHE_PATH": cache, "CUDA_VISIBLE_DEVICES": visible[k] if gpus else "", "OMP_NUM_THREADS": "1"}
-        specification[f"worker-{k}"] = {"cls": Nanny, "options": {"nthreads": 1, "env": env, "silence_logs": logging.ERROR}}
+        options = {"nthreads": 1, "env": env, "memory_limit": MEMORY_LIMIT // count, "silence_logs": logging.ERROR}
+        specification[f"worker-{k}"] = {"cls": Nanny, "options": options}
     try:
         scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0", "port": int(port)}}
         with SpecCluster(workers=specification, scheduler=scheduler, silence_logs=logging.ERROR) as cluster:
@@ -353,15 +357,30 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
     if missing:
         with _executor(executor, spec, workers, scheduler, report) as pool:
-            futures = [pool.submit(run_batch, spec, points, out) for points in batches(missing, batch, group)]
-            bar = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress)
-            for future in concurrent.futures.as_completed(futures):
-                bar.update(len(future.result()))
+            work = {pool.submit(run_batch, spec, points, out): points for points in batches(missing, batch, group)}
+            bar, died = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress), []
+            for future in concurrent.futures.as_completed(work):
+                try:
+                    bar.update(len(future.result()))
+                except KilledWorker as error:
+                    died.append((work[future], error))
             bar.close()
+            if died:
+                raise workers_died(died, out) from died[0][1]
     rows = table_rows(out, points)
     write_table(rows, os.path.join(out, "table.csv"))
     sweep_chart_png(rows, list(spec.grid), spec.measure, os.path.join(out, "chart.png"), title=spec.scene)
     return rows
+
+
+def workers_died(died: list, out: str) -> RuntimeError:
+    """The sweep's error for the batches (their points, Dask's error) whose worker process died."""
+    names = "; ".join(f"{points[0].name} … {points[-1].name}" for points, _ in died)
+    return RuntimeError(
+        f"{len(died)} batch(es) ({names}) lost their worker every time they were tried: its process was stopped by "
+        "Dask's memory monitor (at 95% of the worker's memory limit) or crashed in native code. Every other point is "
+        f"kept in {os.path.join(out, 'points')}: run the same sweep again to compute only the rest, with a smaller "
+        "--batch (fewer worlds per run) or fewer workers per machine")
 
 
 def sweep_to_table(spec: SweepSpec, table: str, *, batch: int = 1, progress: bool = True,
