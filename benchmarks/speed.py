@@ -78,16 +78,17 @@ def seconds_per_call(call, device, budget: float, repeats: int = 5) -> float:
     return float(np.median(timings))
 
 
-def walker_shell(level: int, device, dtype, deterministic=False, volume=True, staged_block=None):
+def walker_shell(level: int, device, dtype, deterministic=False, volume=True, staged_block=None, force_block=256):
     """The sphere walker's shell on a level-`level` icosphere resting on the ground (volume=False:
-    without the volume penalty, the Koiter terms alone; staged_block: Shell's)."""
+    without the volume penalty, the Koiter terms alone; staged_block, force_block: Shell's)."""
     mesh = icosphere(RADIUS, level)
     weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
     touching, depth = ground_lift(mesh, weight, walker_ground())
     mesh = Mesh(mesh.vertices + [0.0, 0.0, touching - depth], mesh.triangles)
     penalty = MU_V * WALKER["young"] * THICKNESS / RADIUS**4 if volume else 0.0
     shell = Shell(mesh, thickness=THICKNESS, young=WALKER["young"], poisson=WALKER["poisson"], AC=AC, AI=0.0,
-                  volume_penalty=penalty, deterministic=deterministic, staged_block=staged_block, device=device,
+                  volume_penalty=penalty, deterministic=deterministic, staged_block=staged_block,
+                  force_block=force_block, device=device,
                   dtype=dtype)  # fmt: skip
     return mesh, shell
 
@@ -153,9 +154,10 @@ def fma_kernel(iterations: int, out: wp.array(dtype=wp.float32)):
 
 
 def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: bool, gather_max_level: int,
-                staged_blocks=()) -> list:  # fmt: skip
-    """One level's kernel timings; the staged force kernels (`staged_blocks`, triangles per block) also
-    record their largest force difference from the atomic scatter's, relative to its largest force."""
+                staged_blocks=(), force_blocks=()) -> list:  # fmt: skip
+    """One level's kernel timings; the atomic force kernel in blocks of `force_blocks` threads and the staged
+    force kernels (`staged_blocks`, triangles per block) also record their largest force difference from the
+    atomic scatter's (blocks of 256), relative to its largest force."""
     rows = []
     mesh, shell = walker_shell(level, device, dtype)
     rng = np.random.default_rng(level)
@@ -163,6 +165,7 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     c = rng.random(mesh.n_vertices)
     shells = [("koiter forces, atomic scatter", dict())]
     shells += [("koiter forces, deterministic gather", dict(deterministic=True))] if level <= gather_max_level else []
+    shells += [(f"koiter forces, atomic, {b} threads a block", dict(force_block=b)) for b in force_blocks]
     shells += [(f"koiter forces, staged {b} per block", dict(staged_block=b)) for b in staged_blocks]
     reference = None
     for name, options in shells:
@@ -306,6 +309,8 @@ def main(argv=None) -> int:
     parser.add_argument("--staged-blocks", type=int, nargs="*", default=None,
                         help="triangles per block of the staged force kernel's rows (default 64 128 256 on CUDA, 1 on "
                              "the CPU)")  # fmt: skip
+    parser.add_argument("--force-blocks", type=int, nargs="*", default=[],
+                        help="threads a block of extra rows of the atomic force kernel (its default launch: 256)")
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3, short timings (smoke test)")
@@ -322,7 +327,7 @@ def main(argv=None) -> int:
         rows = []
         for dtype in ("float32", "float64"):
             rows += kernel_rows(level, device.alias, dtype, budget, level <= args.numpy_max_level, args.gather_max_level,
-                                staged)  # fmt: skip
+                                staged, args.force_blocks)  # fmt: skip
         kernels += rows
         report(rows, peaks)
     for level in step_levels:

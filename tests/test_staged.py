@@ -1,5 +1,6 @@
 """Koiter forces with each block's patch vertices staged in shared memory (kernels/staged.py): the
-per-block tables against a direct set computation, the forces against the atomic scatter's."""
+per-block tables against a direct set computation, the forces against the atomic scatter's; the atomic
+scatter launched in smaller blocks (force_block) against its default launch."""
 
 import numpy as np
 import pytest
@@ -59,9 +60,31 @@ def test_staged_forces_of_batched_worlds_equal_the_atomic_scatters_on_cuda(block
     np.testing.assert_allclose(staged, atomic, rtol=0, atol=1e-12 * np.abs(atomic).max())
 
 
+def test_the_force_launchs_block_size_leaves_the_cpu_forces_as_they_are(rng):
+    mesh = random_genus0(24, 3).subdivided(1)
+    x = mesh.vertices + 0.02 * rng.normal(size=mesh.vertices.shape)
+    c = rng.random(mesh.n_vertices)
+    default, small = Shell(mesh, **ACTIVE, device="cpu"), Shell(mesh, **ACTIVE, force_block=64, device="cpu")
+    assert small.force_block == 64 and small.twin("float32").force_block == 64
+    assert np.array_equal(small.forces(x, c), default.forces(x, c))
+
+
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="the block size matters on CUDA only")
+@pytest.mark.parametrize("threads", [32, 64, 128])
+def test_forces_launched_in_smaller_blocks_equal_the_default_launchs_on_cuda(threads, rng):
+    mesh = icosphere(3.0, 3)
+    x, c = mesh.vertices + 0.02 * rng.normal(size=mesh.vertices.shape), rng.random(mesh.n_vertices)
+    default = Shell(mesh, **ACTIVE, device="cuda:0").forces(x, c)
+    small = Shell(mesh, **ACTIVE, force_block=threads, device="cuda:0").forces(x, c)
+    np.testing.assert_allclose(small, default, rtol=0, atol=1e-12 * np.abs(default).max())
+
+
 @pytest.mark.parametrize(
     "options, message",
     [
+        (dict(force_block=100), "force_block must be one of 32, 64"),
+        (dict(force_block=512), "force_block must be one of"),
+        (dict(force_block=True), "force_block must be one of"),
         (dict(staged_block=4, device="cpu"), "staged_block = 4 on the CPU"),
         (dict(staged_block=0), "staged_block must be a whole number"),
         (dict(staged_block=True), "staged_block must be a whole number"),

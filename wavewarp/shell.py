@@ -47,6 +47,7 @@ from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
+FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (the module's launch bound is 256)
 
 
 def per_world(name: str, value, worlds: int, check=finite) -> np.ndarray:
@@ -98,7 +99,9 @@ class Shell:
     gradient "analytic" or "autodiff"; deterministic=True sums forces in a fixed order (None: as
     `wavewarp.device.set_deterministic` chose); staged_block=B stages each B consecutive triangles' patch
     vertices in shared memory for the force kernel (one global read and atomic per vertex and block;
-    CUDA, B = 1 on the CPU, where Warp runs a tile kernel's block as one lane).
+    CUDA, B = 1 on the CPU, where Warp runs a tile kernel's block as one lane); force_block, the threads
+    of a block of the (atomic) force kernel's CUDA launch: a multiple of 32 up to 256 (the kernel's
+    ~160 registers a thread let one 256-thread block, three of 128, run on an SM).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -106,7 +109,7 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 staged_block=None, device=None, dtype="float32"):  # fmt: skip
+                 staged_block=None, force_block=256, device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
@@ -173,6 +176,9 @@ class Shell:
                 self._jets = wp.zeros((n_q, 6), dtype=self.vec3)
         self.staged_block = staged_block
         self._staged = None if staged_block is None else self._staged_tables(staged_block)
+        if isinstance(force_block, bool) or force_block not in FORCE_BLOCKS:
+            raise ValueError(f"force_block must be one of {', '.join(map(str, FORCE_BLOCKS))} threads, got {force_block!r}")
+        self.force_block = int(force_block)
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -197,7 +203,8 @@ class Shell:
         float32 shell works on its float64 twin. Self-contact is not copied."""
         twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
-                     bilayer_radius=self._bilayer_radius, staged_block=self.staged_block, device=self.device,
+                     bilayer_radius=self._bilayer_radius, staged_block=self.staged_block,
+                     force_block=self.force_block, device=self.device,
                      dtype=dtype)  # fmt: skip
         twin.rest_volume = self.rest_volume
         return twin
@@ -360,7 +367,7 @@ class Shell:
                             device=self.device)  # fmt: skip
         elif not self.deterministic:
             wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles, inputs=inputs,
-                      outputs=[self._energy_density, forces], device=self.device)  # fmt: skip
+                      outputs=[self._energy_density, forces], block_dim=self.force_block, device=self.device)  # fmt: skip
         else:
             wp.launch(shell_force_jets_kernel, dim=t.n_quadrature_points, inputs=inputs,
                       outputs=[self._energy_density, self._jets], device=self.device)  # fmt: skip
