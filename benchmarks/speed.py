@@ -78,17 +78,16 @@ def seconds_per_call(call, device, budget: float, repeats: int = 5) -> float:
     return float(np.median(timings))
 
 
-def walker_shell(level: int, device, dtype, deterministic=False, volume=True, staged_block=None, force_block=256):
+def walker_shell(level: int, device, dtype, deterministic=False, volume=True, **options):
     """The sphere walker's shell on a level-`level` icosphere resting on the ground (volume=False:
-    without the volume penalty, the Koiter terms alone; staged_block, force_block: Shell's)."""
+    without the volume penalty, the Koiter terms alone; `options`: Shell's force-kernel choices)."""
     mesh = icosphere(RADIUS, level)
     weight = WALKER["density"] * WALKER["gravity"] * 4 * np.pi * RADIUS**2
     touching, depth = ground_lift(mesh, weight, walker_ground())
     mesh = Mesh(mesh.vertices + [0.0, 0.0, touching - depth], mesh.triangles)
     penalty = MU_V * WALKER["young"] * THICKNESS / RADIUS**4 if volume else 0.0
     shell = Shell(mesh, thickness=THICKNESS, young=WALKER["young"], poisson=WALKER["poisson"], AC=AC, AI=0.0,
-                  volume_penalty=penalty, deterministic=deterministic, staged_block=staged_block,
-                  force_block=force_block, device=device,
+                  volume_penalty=penalty, deterministic=deterministic, **options, device=device,
                   dtype=dtype)  # fmt: skip
     return mesh, shell
 
@@ -165,6 +164,7 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     c = rng.random(mesh.n_vertices)
     shells = [("koiter forces, atomic scatter", dict())]
     shells += [("koiter forces, deterministic gather", dict(deterministic=True))] if level <= gather_max_level else []
+    shells += [("koiter forces, atomic, one thread a point", dict(force_threads="point"))]
     shells += [(f"koiter forces, atomic, {b} threads a block", dict(force_block=b)) for b in force_blocks]
     shells += [(f"koiter forces, staged {b} per block", dict(staged_block=b)) for b in staged_blocks]
     reference = None

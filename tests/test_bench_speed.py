@@ -19,13 +19,14 @@ def test_bench_speed_quick_writes_json_and_chart(tmp_path):
             assert ("koiter forces, atomic scatter", dtype, level) in kernels
             assert ("koiter forces, deterministic gather", dtype, level) in kernels
             assert ("koiter forces, atomic, 64 threads a block", dtype, level) in kernels
+            assert ("koiter forces, atomic, one thread a point", dtype, level) in kernels
         assert ("numpy shell forces (koiter + volume)", "float64", level) in kernels
         for ground in ("explicit ground", "implicit ground (8 sweeps)"):
             assert (f"mechanics step, {ground}", "float32", level) in kernels
     for row in result["kernels"]:
         assert row["triangles"] == 20 * 4 ** row["level"]
-        if row["kernel"].startswith("koiter forces, atomic, "):  # the CPU ignores the block size: the same sums
-            assert row["max_relative_difference"] == 0.0
+        if row["kernel"].startswith("koiter forces, atomic, "):  # the same sums, or the same in another order
+            assert row["max_relative_difference"] <= (0.0 if "block" in row["kernel"] else 1e-5)
         assert row["triangles_per_second"] * row["seconds"] == pytest.approx(row["triangles"])
         if "floor_seconds" in row:  # the floor is the larger of the two bounds
             assert row["floor_seconds"] == max(row["bytes"] / result["peaks"]["bandwidth_bytes_per_s"],
