@@ -9,7 +9,7 @@ wave runs on the rest shell), over `--periods` FHN periods (default 6) at the sc
 (`--set` overrides apply to every run). Writes locomotion.json: the device, the date, the twins' ratios per scene
 (`twins`: T and the first front's mean arrival, sensitive over insensitive; the speed, insensitive
 over sensitive) and a list of runs with `scene`, `sensitive`, `period` (T, measured),
-`speed_R_per_T`, `distance_R`, `pulse_displacements_R`, `pulse_alignment`, `lateral_R`, `sag_R`,
+`speed_R_per_T`, `distance_R`, `pulse_displacements_R`, `pulse_alignment`, `crossing_heights_R`, `lateral_R`, `sag_R`,
 `first_front_mean_arrival`, `total_concentration_error`, the resolved parameters and the wall time; and locomotion.png, the forward displacement in R against t/T (Fig. 3a: sensitive
 solid, insensitive dashed). `--quick`: coarse meshes over 2.2 periods (a CPU smoke run).
 `--seeds K` runs every walker K times, its rest shape perturbed by `--noise` (default 1e-3 R) with

@@ -13,7 +13,7 @@ import warp as wp
 from scipy.spatial.transform import Rotation
 
 from wavewarp.cli import main
-from wavewarp.measurements import BodyRotation, best_rotation
+from wavewarp.measurements import BodyRotation, best_rotation, locomotion
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import load_scene, resolve
 
@@ -22,6 +22,25 @@ def run_cli(capsys, *argv):
     code = main(["run", *argv])
     captured = capsys.readouterr()
     return code, captured.out, captured.err
+
+
+def test_locomotion_measures_each_pulse_of_a_made_up_trace():
+    """c at the origin = sin(2πt/T): upward half-maximum crossings at t = T/12 + kT. The centre of mass moves
+    along x at speed u, drifts up at rate h, and the origin vertex lies behind it along -x: every pulse
+    moves u T, aligned with the wave, and the heights at the crossings grow by h T a pulse."""
+    T, u, h, radius = 50.0, 0.01, 0.002, 2.0
+    t = np.linspace(0.0, 4.3 * T, 20001)
+    com = np.stack([u * t, np.zeros_like(t), 1.0 + h * t], axis=1)
+    origin = com - [0.5, 0.0, 0.0]
+    trace = np.column_stack([t, np.sin(2 * np.pi * t / T), com, origin])
+    out = locomotion(trace, forward=[1.0, 0.0, 0.0], radius=radius, rest_height=1.1, period_kinetic=T)
+    crossings = T / 12 + T * np.arange(5)
+    assert out["period"] == pytest.approx(T, rel=1e-6)
+    np.testing.assert_allclose(out["pulse_displacements_R"], [u * T / radius] * 4, rtol=1e-6)
+    np.testing.assert_allclose(out["pulse_alignment"], [1.0] * 4, rtol=1e-9)
+    np.testing.assert_allclose(out["crossing_heights_R"], h * crossings / radius, rtol=1e-6)
+    assert out["speed_R_per_T"] == pytest.approx(u * T / radius, rel=1e-6)
+    assert out["sag_R"] == pytest.approx(0.1 / radius) and out["lateral_R"] == 0.0
 
 
 def kinetic_period_by_euler(nu=-0.01, kappa=1e-4, epsilon=0.005, dt=0.01, t_end=2500.0):

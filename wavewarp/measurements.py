@@ -226,6 +226,8 @@ def locomotion(trace: np.ndarray, forward, radius: float, rest_height: float, pe
     `pulse_displacements_R` its forward displacement, and `pulse_alignment` the cosine between its
     horizontal displacement and the direction of propagation at its start, the horizontal
     direction from the origin vertex (the origin turns with the shell) to the centre of mass.
+    `crossing_heights_R`: the centre of mass's height at each crossing (the same phase of every
+    pulse) above its height at the start, in R: a sag still settling over the run shows as a drift.
     `sag_R`: the elastic sag, how far the settled centre of mass lies below that of the rigid
     shell in the same contact (`rest_height`).
     """
@@ -236,7 +238,7 @@ def locomotion(trace: np.ndarray, forward, radius: float, rest_height: float, pe
     out = {"period_kinetic": period_kinetic, "period": None, "displacement": displacement.tolist(),
            "distance_R": float(displacement @ forward / radius), "lateral_R": float(displacement @ side / radius),
            "sag_R": float((rest_height - com[0, 2]) / radius), "speed_R_per_T": None, "pulse_displacements_R": [],
-           "pulse_alignment": []}  # fmt: skip
+           "pulse_alignment": [], "crossing_heights_R": []}  # fmt: skip
     crossings = upward_crossings(t, c)
     period = measured_period(crossings)
     if period is not None:
@@ -246,6 +248,7 @@ def locomotion(trace: np.ndarray, forward, radius: float, rest_height: float, pe
         direction = at[:-1, :2] - at[:-1, 3:5]
         alignment = np.sum(step * direction, axis=1) / (np.linalg.norm(step, axis=1) * np.linalg.norm(direction, axis=1))
         out.update(period=period, pulse_displacements_R=(np.diff(along) / radius).tolist(),
+                   crossing_heights_R=((at[:, 2] - com[0, 2]) / radius).tolist(),
                    pulse_alignment=alignment.tolist(), speed_R_per_T=float((along[-1] - along[0]) / radius / (len(crossings) - 1)))  # fmt: skip
     return out
 
