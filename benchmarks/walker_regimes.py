@@ -97,12 +97,23 @@ def run_regimes(pairs: list, args, device: str) -> None:
                              range(len(pairs), 0, -1)))  # raises a sweep's error  # fmt: skip
 
 
-def pulses(row: dict) -> list:
-    """A row's forward displacement per pulse, in R (columns pulse_displacements_R_1, _2, ...)."""
+def pulses(row: dict, name: str = "pulse_displacements_R") -> list:
+    """A row's listed measurement `name` (columns NAME_1, NAME_2, ...): by default its forward displacement
+    per pulse, in R."""
     out = []
-    while row.get(f"pulse_displacements_R_{len(out) + 1}"):
-        out.append(float(row[f"pulse_displacements_R_{len(out) + 1}"]))
+    while row.get(f"{name}_{len(out) + 1}"):
+        out.append(float(row[f"{name}_{len(out) + 1}"]))
     return out
+
+
+def height_drift(rows: list) -> float | None:
+    """The mean over seeds of the least-squares slope of the centre's height at the pulses' crossings against
+    the pulse count, in R a pulse (None where the tables lack `crossing_heights_R` or a seed has fewer than
+    three crossings)."""
+    heights = [pulses(r, "crossing_heights_R") for r in rows]
+    if not heights or min(map(len, heights)) < 3:
+        return None
+    return float(np.mean([np.polyfit(np.arange(len(h)), h, 1)[0] for h in heights]))
 
 
 def seeds_of(rows: list, sensitive: bool) -> list:
@@ -112,8 +123,8 @@ def seeds_of(rows: list, sensitive: bool) -> list:
 
 def twin(rows: list, sensitive: bool) -> dict:
     """n, speeds, mean, sd, share of seeds moving forward, mean period and (tables that have them) the
-    share of all pulses moving forward, the mean rolling angle over the run, in degrees, and the mean
-    settled sag / R of one twin's seeds."""
+    share of all pulses moving forward, the mean rolling angle over the run, in degrees, the mean
+    settled sag / R and the centre's `height_drift` of one twin's seeds."""
     chosen = seeds_of(rows, sensitive)
     speeds = [float(r["speed_R_per_T"]) for r in chosen]
     every_pulse = [d for r in chosen for d in pulses(r)]
@@ -127,7 +138,8 @@ def twin(rows: list, sensitive: bool) -> dict:
             "sd": float(np.std(speeds, ddof=1)) if n > 1 else 0.0,
             "forward_share": sum(s > 0 for s in speeds) / n if n else None,
             "pulse_forward_share": float(np.mean([d > 0 for d in every_pulse])) if every_pulse else None,
-            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R")}  # fmt: skip
+            "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R"),
+            "height_drift_R_per_pulse": height_drift(chosen)}  # fmt: skip
 
 
 def compared(rows: list, skip: int = 0, window=None) -> tuple:

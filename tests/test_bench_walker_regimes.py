@@ -208,6 +208,31 @@ def test_halves_of_the_compared_pulses_that_disagree_leave_the_claims_undecided(
     assert regime["claims"]["prism_ratio_above_2"] is None
 
 
+def test_the_centres_height_drift_is_the_slope_at_the_crossings(tmp_path):
+    """Heights at the crossings rising 1e-4 R a pulse (sensitive, with a wobble that a straight line
+    averages out) and flat (insensitive); tables without the column report none."""
+    path = tmp_path / "overdamped-implicit-coulomb_sphere-walker.csv"
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=["point", "sensitive", "seed", "status", "period", "speed_R_per_T",
+                                               *(f"crossing_heights_R_{k}" for k in range(1, 6))])  # fmt: skip
+        writer.writeheader()
+        for flag, slope in ((True, 1e-4), (False, 0.0)):
+            for seed in (0, 1):
+                heights = [slope * k + (2e-5 if k in (1, 3) else 0.0) + 1e-3 * seed for k in range(5)]
+                writer.writerow({"point": f"s{flag}{seed}", "sensitive": str(flag).lower(), "seed": seed, "status": "done",
+                                 "period": 270.0, "speed_R_per_T": 1e-3,
+                                 **{f"crossing_heights_R_{k}": v for k, v in enumerate(heights, 1)}})  # fmt: skip
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    cell = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb"]
+    sphere = cell["scenes"]["sphere-walker"]
+    assert sphere["sensitive"]["height_drift_R_per_pulse"] == pytest.approx(1e-4, rel=1e-9)
+    assert sphere["insensitive"]["height_drift_R_per_pulse"] == pytest.approx(0.0, abs=1e-15)
+    write_pulses(path, {0: [1e-3, 1e-3]}, {0: [1e-3, 1e-3]})
+    assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
+    cell = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb"]
+    assert cell["scenes"]["sphere-walker"]["sensitive"]["height_drift_R_per_pulse"] is None
+
+
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
     with pytest.raises(SystemExit):
         cli(["bench", "walker_regimes", "--tables", str(tmp_path)])
