@@ -8,6 +8,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
+from .limit_surface import jet_force
 from .shell import MAX_PATCH, VolumeMoments, quadrature_point_jet
 
 
@@ -47,8 +48,7 @@ def point_forces_kernel(
     size = patch_start[t + 1] - start
     for k in range(wp.static(MAX_PATCH)):
         if k < size:
-            b = basis[row, k]
-            wp.atomic_sub(forces, patch_vertices[start + k], b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22)
+            wp.atomic_sub(forces, patch_vertices[start + k], jet_force(basis[row, k], g, g1, g2, g11, g12, g22))
 
 
 declare_overloads(point_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", basis="vec6[,]",

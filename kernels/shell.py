@@ -19,7 +19,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .limit_surface import basis_row, entry_point, first_form, patch_jet, patch_scalar, second_form
+from .limit_surface import basis_row, entry_point, first_form, jet_force, patch_jet, patch_scalar, second_form
 from .reduce import block_add
 
 MAX_PATCH = wp.constant(18)  # control vertices of a patch (valence N + 6): vertices of valence up to 12
@@ -264,8 +264,7 @@ def triangle_forces(
         )  # fmt: skip
         for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
             if k < size:
-                b = basis[row, k]
-                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
+                f = jet_force(basis[row, k], g, g1, g2, g11, g12, g22)
                 for c in range(3):
                     accumulated[k, c] = accumulated[k, c] - f[c]
     return accumulated
