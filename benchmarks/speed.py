@@ -156,7 +156,7 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
                 staged_blocks=(), force_blocks=()) -> list:  # fmt: skip
     """One level's kernel timings; the atomic force kernel in blocks of `force_blocks` threads and the staged
     force kernels (`staged_blocks`, triangles per block) also record their largest force difference from the
-    atomic scatter's (blocks of 256), relative to its largest force."""
+    atomic scatter's (the default launch, blocks of 64), relative to its largest force."""
     rows = []
     mesh, shell = walker_shell(level, device, dtype)
     rng = np.random.default_rng(level)
@@ -164,7 +164,6 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     c = rng.random(mesh.n_vertices)
     shells = [("koiter forces, atomic scatter", dict())]
     shells += [("koiter forces, deterministic gather", dict(deterministic=True))] if level <= gather_max_level else []
-    shells += [("koiter forces, atomic, one thread a point", dict(force_threads="point"))]
     shells += [(f"koiter forces, atomic, {b} threads a block", dict(force_block=b)) for b in force_blocks]
     shells += [(f"koiter forces, staged {b} per block", dict(staged_block=b)) for b in staged_blocks]
     reference = None
@@ -310,7 +309,7 @@ def main(argv=None) -> int:
                         help="triangles per block of the staged force kernel's rows (default 64 128 256 on CUDA, 1 on "
                              "the CPU)")  # fmt: skip
     parser.add_argument("--force-blocks", type=int, nargs="*", default=[],
-                        help="threads a block of extra rows of the atomic force kernel (its default launch: 256)")
+                        help="threads a block of extra rows of the atomic force kernel (its default launch: 64)")
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3, short timings (smoke test)")

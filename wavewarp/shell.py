@@ -23,7 +23,6 @@ from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.reduce import REDUCTION_BLOCK
-from .kernels.point_forces import point_forces_kernel
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
     MAX_PATCH,
@@ -48,7 +47,6 @@ from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
-FORCE_THREADS = ("triangle", "point")
 FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (the module's launch bound is 256)
 
 
@@ -103,9 +101,8 @@ class Shell:
     vertices in shared memory for the force kernel (one global read and atomic per vertex and block;
     CUDA, B = 1 on the CPU, where Warp runs a tile kernel's block as one lane); force_block, the threads
     of a block of the (atomic) force kernel's CUDA launch: a multiple of 32 up to 256 (the kernel's
-    ~160 registers a thread let one 256-thread block, three of 128, run on an SM); force_threads
-    "triangle" (one thread a triangle, its patch's forces summed in registers) or "point" (one thread a
-    quadrature point, each adding its own share with atomics: fewer registers, more atomics).
+    ~160 registers a thread let three 64-thread blocks run on an SM where one of 256 does: 64, the
+    default, is the fastest measured).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -113,7 +110,7 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 staged_block=None, force_block=256, force_threads="triangle", device=None, dtype="float32"):  # fmt: skip
+                 staged_block=None, force_block=64, device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
@@ -183,12 +180,6 @@ class Shell:
         if isinstance(force_block, bool) or force_block not in FORCE_BLOCKS:
             raise ValueError(f"force_block must be one of {', '.join(map(str, FORCE_BLOCKS))} threads, got {force_block!r}")
         self.force_block = int(force_block)
-        if force_threads not in FORCE_THREADS:
-            raise ValueError(f"force_threads must be one of {', '.join(FORCE_THREADS)}, got {force_threads!r}")
-        if force_threads == "point" and (self.deterministic or staged_block is not None):
-            raise ValueError("force_threads='point' adds each point's forces with atomics; deterministic=True and "
-                             "staged_block sum them another way: choose one")  # fmt: skip
-        self.force_threads = force_threads
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -214,7 +205,7 @@ class Shell:
         twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
                      bilayer_radius=self._bilayer_radius, staged_block=self.staged_block,
-                     force_block=self.force_block, force_threads=self.force_threads, device=self.device,
+                     force_block=self.force_block, device=self.device,
                      dtype=dtype)  # fmt: skip
         twin.rest_volume = self.rest_volume
         return twin
@@ -375,9 +366,6 @@ class Shell:
             wp.launch_tiled(staged["kernel"], dim=[staged["blocks"]], block_dim=staged["block"],
                             inputs=inputs + [self._energy_density, staged["block_vertices"], forces],
                             device=self.device)  # fmt: skip
-        elif self.force_threads == "point":
-            wp.launch(point_forces_kernel, dim=t.n_quadrature_points, inputs=inputs,
-                      outputs=[self._energy_density, forces], block_dim=self.force_block, device=self.device)  # fmt: skip
         elif not self.deterministic:
             wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles, inputs=inputs,
                       outputs=[self._energy_density, forces], block_dim=self.force_block, device=self.device)  # fmt: skip
