@@ -53,11 +53,12 @@ from wavewarp.sweep import SweepSpec, local_cluster, sweep  # noqa: E402
 SCENES = ("sphere-walker", "prism-walker", "cube-walker")
 OVERDAMPED = ["mechanics=overdamped", "contact_solve=implicit"]
 REGIMES = {
-    "inertial-explicit-kf0.1": [],  # the scenes' defaults: friction a weak viscous drag
-    "inertial-implicit-coulomb": ["contact_solve=implicit", "sharpness=inf"],
+    # inertial, friction a weak viscous drag (the paper's k_f = 0.1)
+    "inertial-explicit-kf0.1": ["mechanics=inertial", "contact_solve=explicit", "sharpness=0.1"],
+    "inertial-implicit-coulomb": ["mechanics=inertial", "contact_solve=implicit", "sharpness=inf"],
     # overdamped at the default drag ζ = 2 η_ground ≈ 61: ζ / (μ k_f g) from 1.2e4 (k_f = 0.1) to 0 (Coulomb)
     **{f"overdamped-implicit-kf{k}": [*OVERDAMPED, f"sharpness={k}"] for k in ("0.1", "1", "10", "100", "1000", "1e4")},
-    "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],
+    "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],  # the scenes' defaults
     # less drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
     "overdamped-implicit-coulomb-drag20": [*OVERDAMPED, "sharpness=inf", "drag=20"],
     "overdamped-implicit-coulomb-drag6": [*OVERDAMPED, "sharpness=inf", "drag=6"],
@@ -116,6 +117,17 @@ def height_drift(rows: list) -> float | None:
     return float(np.mean([np.polyfit(np.arange(len(h)), h, 1)[0] for h in heights]))
 
 
+def distance_by_pulse(rows: list) -> dict | None:
+    """Fig. 3a's curve from the pulses: the distance after each of the first k pulses (k the fewest any seed
+    has), mean and sd over the seeds, in R (None without pulses)."""
+    walks = [np.cumsum(pulses(r)) for r in rows]
+    k = min(map(len, walks), default=0)
+    if k == 0:
+        return None
+    walks = np.array([w[:k] for w in walks])
+    return {"mean": walks.mean(axis=0).tolist(), "sd": (walks.std(axis=0, ddof=1) if len(walks) > 1 else 0 * walks[0]).tolist()}
+
+
 def seeds_of(rows: list, sensitive: bool) -> list:
     """The rows of one twin that have a speed (a whole period)."""
     return [r for r in rows if str(r["sensitive"]).lower() == str(sensitive).lower() and r.get("speed_R_per_T")]
@@ -124,7 +136,7 @@ def seeds_of(rows: list, sensitive: bool) -> list:
 def twin(rows: list, sensitive: bool) -> dict:
     """n, speeds, mean, sd, share of seeds moving forward, mean period and (tables that have them) the
     share of all pulses moving forward, the mean rolling angle over the run, in degrees, the mean
-    settled sag / R and the centre's `height_drift` of one twin's seeds."""
+    settled sag / R, the centre's `height_drift` and the `distance_by_pulse` of one twin's seeds."""
     chosen = seeds_of(rows, sensitive)
     speeds = [float(r["speed_R_per_T"]) for r in chosen]
     every_pulse = [d for r in chosen for d in pulses(r)]
@@ -139,7 +151,7 @@ def twin(rows: list, sensitive: bool) -> dict:
             "forward_share": sum(s > 0 for s in speeds) / n if n else None,
             "pulse_forward_share": float(np.mean([d > 0 for d in every_pulse])) if every_pulse else None,
             "period": mean("period"), "rolling_angle_deg": mean("rolling_angle_deg"), "sag_R": mean("sag_R"),
-            "height_drift_R_per_pulse": height_drift(chosen)}  # fmt: skip
+            "height_drift_R_per_pulse": height_drift(chosen), "distance_by_pulse_R": distance_by_pulse(chosen)}  # fmt: skip
 
 
 def compared(rows: list, skip: int = 0, window=None) -> tuple:
@@ -278,10 +290,30 @@ def short(regime: str) -> str:
         "inertial-explicit-", "inertial explicit ").replace("coulomb-", "coulomb ")
 
 
-def chart(result: dict, path: str) -> None:
+def scene_panels(result: dict, height: float) -> tuple:
+    """(figure, [(axes, scene)]): one panel per scene of `result`."""
     scenes = [s for s in SCENES if any(s in r["scenes"] for r in result["regimes"].values())]
-    fig, axes = plt.subplots(1, len(scenes), figsize=(5.0 * len(scenes), 5.2), squeeze=False)
-    for ax, scene in zip(axes[0], scenes):
+    fig, axes = plt.subplots(1, len(scenes), figsize=(5.0 * len(scenes), height), squeeze=False)
+    return fig, list(zip(axes[0], scenes))
+
+
+def finish_panel(ax, scene: str, linthresh: float, ylabel: str, legend_size: int) -> None:
+    ax.axhline(0.0, color="grey", lw=0.8)
+    ax.set_yscale("symlog", linthresh=linthresh)
+    ax.set_ylabel(ylabel)
+    ax.set_title(scene)
+    ax.legend(fontsize=legend_size)
+
+
+def finish_figure(fig, title: str, path: str) -> None:
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    write_png(fig, path, dpi=110)
+
+
+def chart(result: dict, path: str) -> None:
+    fig, panels = scene_panels(result, 5.2)
+    for ax, scene in panels:
         regimes = [r for r in REGIMES if r in result["regimes"] and scene in result["regimes"][r]["scenes"]]
         for k, (key, label) in enumerate((("sensitive", "sensitive"), ("insensitive", "insensitive twin"))):
             cells = [(x, result["regimes"][r]["scenes"][scene]) for x, r in enumerate(regimes)]
@@ -290,15 +322,27 @@ def chart(result: dict, path: str) -> None:
                         color=f"C{k}", capsize=3, label=f"{label}, mean ± sd")  # fmt: skip
             for x, c in cells:
                 ax.plot([x] * c["n"], c["speeds"], ".", color=f"C{k}", alpha=0.35, ms=4)
-        ax.axhline(0.0, color="grey", lw=0.8)
-        ax.set_yscale("symlog", linthresh=1e-4)
         ax.set_xticks(range(len(regimes)), [short(r) for r in regimes], fontsize=7, rotation=60, ha="right")
-        ax.set_ylabel("speed (R per T, forward = along the wave)")
-        ax.set_title(scene)
-        ax.legend(fontsize=7)
-    fig.suptitle(f"walkers across regimes, {result['device_name']}", fontsize=10)
-    fig.tight_layout()
-    write_png(fig, path, dpi=110)
+        finish_panel(ax, scene, 1e-4, "speed (R per T, forward = along the wave)", 7)
+    finish_figure(fig, f"walkers across regimes, {result['device_name']}", path)
+
+
+def gaits_chart(result: dict, path: str) -> None:
+    """Fig. 3a's form: distance / R against t / T (pulses), sensitive solid, insensitive dashed, ± sd bands."""
+    fig, panels = scene_panels(result, 4.4)
+    for ax, scene in panels:
+        regimes = [r for r in REGIMES if scene in result["regimes"].get(r, {}).get("scenes", {})]
+        for k, regime in enumerate(regimes):
+            for key, style in (("sensitive", "-"), ("insensitive", "--")):
+                walk = result["regimes"][regime]["scenes"][scene][key]["distance_by_pulse_R"]
+                if walk is None:
+                    continue
+                t, mean, sd = np.arange(len(walk["mean"]) + 1), np.r_[0.0, walk["mean"]], np.r_[0.0, walk["sd"]]
+                ax.plot(t, mean, style, color=f"C{k % 10}", label=f"{short(regime)}, {key}")
+                ax.fill_between(t, mean - sd, mean + sd, color=f"C{k % 10}", alpha=0.2, lw=0)
+        ax.set_xlabel("t / T (pulses)")
+        finish_panel(ax, scene, 1e-3, "distance / R along the wave, mean ± sd", 6)
+    finish_figure(fig, f"walkers pulse by pulse, {result['device_name']}", path)
 
 
 def main(argv=None) -> int:
@@ -355,6 +399,10 @@ def main(argv=None) -> int:
         print(f"{regime}: " + "; ".join(f"{scene} {speed(c['sensitive'])} / {speed(c['insensitive'])} R/T"
                                          for scene, c in cell["scenes"].items()) + f"; claims {cell['claims']}")  # fmt: skip
     write_result(result, args.out, "walker_regimes", chart)
+    if any(c[key]["distance_by_pulse_R"] for r in regimes.values() for c in r["scenes"].values()
+           for key in ("sensitive", "insensitive")):  # fmt: skip
+        gaits_chart(result, os.path.join(args.out, "walker_regimes_gaits.png"))
+        print(f"wrote {os.path.join(args.out, 'walker_regimes_gaits.png')}")
     return 0
 
 

@@ -29,7 +29,8 @@ class Parameters(WalkerParameters):
     origin: str = param("edge", "where the first pulse starts", choices=tuple(ORIGINS))
 
 
-QUICK = {"divisions": 4, "periods": 2.2, "frames": 4}  # --quick: a smoke test at 4 divisions (its front pins)
+# --quick: a smoke test at 4 divisions (its front pins), the contact coupled by 2 sweeps
+QUICK = {"divisions": 4, "periods": 2.2, "frames": 4, "contact_sweeps": 2}
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

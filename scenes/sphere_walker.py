@@ -18,7 +18,8 @@ class Parameters(WalkerParameters):
     level: int = param(4, "icosphere level (level 4: 5,120 triangles, where the FHN front travels)", minimum=1)
 
 
-QUICK = {"level": 2, "periods": 2.2, "frames": 4}  # --quick: a smoke test at level 2 (its front pins)
+# --quick: a smoke test at level 2 (its front pins), the contact coupled by 2 sweeps
+QUICK = {"level": 2, "periods": 2.2, "frames": 4, "contact_sweeps": 2}
 
 
 def build(p, *, mesh=None, device=None, seed=0, report=print):

@@ -98,6 +98,11 @@ def test_twins_are_compared_per_unit_time_over_the_pulses_every_seed_has(tmp_pat
     assert cell["sensitive"]["mean"] > cell["insensitive"]["mean"]  # whole runs, per pulse
     assert result["claims"]["sensitive_sphere_faster"] is False
     assert cell["sensitive"]["pulse_forward_share"] == 1.0 and result["claims"]["forward"] is True
+    for twin, flag in ((sensitive, "sensitive"), (insensitive, "insensitive")):  # Fig. 3a's curve over the pulses
+        walks = np.array([np.cumsum(p) for p in twin.values()])  # each twin's seeds have equally many
+        assert cell[flag]["distance_by_pulse_R"]["mean"] == pytest.approx(walks.mean(axis=0), rel=1e-12)
+        assert cell[flag]["distance_by_pulse_R"]["sd"] == pytest.approx(walks.std(axis=0, ddof=1), rel=1e-12)
+    assert (tmp_path / "walker_regimes_gaits.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_one_backward_pulse_fails_the_forward_claim(tmp_path):

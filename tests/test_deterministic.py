@@ -89,7 +89,7 @@ def test_set_deterministic_reaches_what_is_built_after_it(deterministic):
 def walker_trace(device, dtype="float32", frames=1):
     module = load_scene("sphere-walker")
     p = resolve(module.Parameters, module.QUICK, ["periods=0.05", f"frames={frames}", "noise=1e-3", "level=1",
-                                                  f"dtype={dtype}"])  # fmt: skip
+                                                  "settle=10", f"dtype={dtype}"])  # fmt: skip
     run = module.build(p, device=device, report=lambda message: None)
     run.record(run.time, run.frame())
     for _ in range(frames):

@@ -83,7 +83,7 @@ def test_a_walker_sweep_runs_each_batch_as_one_batched_run(tmp_path):
     """sphere-walker over AC (a per-world parameter) and sensitive (shared) in batches of 2: each batch
     is one batched run of the points of one `sensitive` (the two AC values its worlds), each point with
     its own result and parameters (a world equals its single run: tests/test_batch.py)."""
-    fixed = ("level=1", "periods=0.1", "frames=1", "settle=1", "dtype=float64")
+    fixed = ("level=1", "periods=0.1", "frames=1", "settle=1", "dtype=float64", "contact_sweeps=2")
     spec = SweepSpec("sphere-walker", grid={"AC": ["0.1", "0.2"], "sensitive": ["true", "false"]}, fixed=fixed,
                      device="cpu")  # fmt: skip
     pool = CountingExecutor()
@@ -102,7 +102,7 @@ def test_a_walker_sweep_runs_each_batch_as_one_batched_run(tmp_path):
 def test_a_batched_walker_sweep_keeps_each_points_trajectory(tmp_path):
     """--h5 with --batch: each world's frames in its point's HDF5 file, as many as its result counts, its
     measurements stored with it; the worlds' trajectories differ (their AC does)."""
-    fixed = ("level=1", "periods=0.1", "frames=2", "settle=1", "dtype=float64")
+    fixed = ("level=1", "periods=0.1", "frames=2", "settle=1", "dtype=float64", "contact_sweeps=2")
     spec = SweepSpec("sphere-walker", grid={"AC": ["0.1", "0.3"]}, fixed=fixed, device="cpu", h5=True)
     sweep(spec, str(tmp_path), executor=CountingExecutor(), batch=2)
     last = []

@@ -20,6 +20,7 @@ from .version import __version__
 from .driver import simulate
 from .device import resolve_device, set_deterministic
 from .geometry import limit_positions
+from .gradients import OBJECTIVES, PARAMETERS, check_differentiable, scene_gradient
 from .io import check_writable
 from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
@@ -217,6 +218,31 @@ def _usd_arguments(command) -> None:
                          help="Loop refinements of the baked surface (default 2: 16 triangles per control triangle)")
 
 
+def _gradient(args) -> int:
+    """A quasi-static scene run to its end, then the gradient of its objective at the last equilibrium."""
+    wp.config.log_level = wp.LOG_WARNING
+    module = load_scene(args.scene)
+    resolve_device(args.device)
+    p = resolve(module.Parameters, getattr(module, "QUICK", {}) if args.quick else None, args.set)
+
+    def report(message):
+        print(f"wavewarp grad {module.NAME}: {message}", file=sys.stderr)
+
+    run = module.build(p, device=args.device, seed=args.seed, report=report)
+    check_differentiable(run, args.wrt, args.objective)
+    for _ in range(run.frames):
+        run.advance_frame()
+    result = scene_gradient(run, args.wrt, args.objective)
+    if args.json:
+        print(json.dumps({"scene": module.NAME, "objective_name": args.objective, "objective": result["objective"],
+                          "gradient": result["gradient"], "residual": result["residual"]}))  # fmt: skip
+    else:
+        print(f"{args.objective} = {result['objective']:.10g}")
+        for name, value in result["gradient"].items():
+            print(f"d {args.objective} / d {name} = {value:.10g}")
+    return 0
+
+
 def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     main_parser = argparse.ArgumentParser(prog="wavewarp", description="Chemical waves on active elastic shells.")
     main_parser.add_argument("--version", action="version", version=f"wavewarp {__version__}")
@@ -263,6 +289,18 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
     _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)
+    grad = commands.add_parser("grad", help="gradient of a quasi-static scene's objective at its last equilibrium "
+                               "with respect to shell parameters (docs/theory/gradients.md)")  # fmt: skip
+    grad.add_argument("scene", help="a quasi-static scene (oocytes, wave guides, buckling) with --set sensitive=false")
+    grad.add_argument("--wrt", required=True, type=lambda text: [name for name in text.split(",") if name],
+                      metavar="NAME[,NAME...]", help=f"parameters: {', '.join(PARAMETERS)}")  # fmt: skip
+    grad.add_argument("--objective", default="height", help=f"one of: {', '.join(OBJECTIVES)} (default height)")
+    grad.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scene parameter")
+    grad.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
+    grad.add_argument("--quick", action="store_true", help="the scene's reduced run")
+    grad.add_argument("--seed", type=int, default=0, help="seed of the scene's random perturbations")
+    grad.add_argument("--json", action="store_true", help="print one JSON object: objective, gradient {name: value}")
+    grad.set_defaults(run=_gradient)
     cluster = commands.add_parser("cluster", help="keep a local Dask cluster running for sweeps (--scheduler ADDRESS)")
     cluster.add_argument("--device", default=None, choices=("cpu", "cuda"),
                          help="cpu, or cuda (one worker per GPU); default: CUDA when present")  # fmt: skip

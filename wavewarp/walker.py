@@ -58,9 +58,10 @@ class WalkerParameters:
     contact_area: float = param(0.0, "area contact: the area a per point of k and β; auto (0) = the mean rest area per control "
                                 "vertex", minimum=0.0, auto=True)  # fmt: skip
     friction: float = param(0.1, "friction coefficient μ", minimum=0.0)
-    sharpness: float = param(0.1, "friction regularisation k_f; inf: Coulomb's law (contact_solve=implicit)", minimum=0.0,
+    sharpness: float = param(math.inf, "friction regularisation k_f of μ|F_n| tanh(k_f |v_t|); inf: Coulomb's law (needs "
+                             "contact_solve=implicit); the paper's 0.1 makes friction a weak viscous drag", minimum=0.0,
                              infinite=True)  # fmt: skip
-    contact_solve: str = param("explicit", "explicit: the contact and friction forces at the step's start (overdamped: "
+    contact_solve: str = param("implicit", "explicit: the contact and friction forces at the step's start (overdamped: "
                                "with the last step's velocity; needs drag > η_ground); implicit: each point's damping, "
                                "stiffness and friction solved with its own end-of-step velocity (any drag, any k_f)",
                                choices=("explicit", "implicit"))  # fmt: skip
@@ -69,9 +70,12 @@ class WalkerParameters:
     slope: float = param(0.0, "ground inclination in degrees (downhill along +x, the wave's direction)", minimum=-60.0)
     damping: float = param(0.2, "damping η of the vibrations relative to the rigid-body motion (inertial mechanics)",
                            minimum=0.0)  # fmt: skip
-    mechanics: str = param("inertial", "inertial: symplectic Euler with lumped mass; overdamped: the mobility model "
-                           "ζ M v = F", choices=("inertial", "overdamped"))  # fmt: skip
-    drag: float = param(0.0, "overdamped mechanics: drag ζ per unit mass; auto (0) = 2 η_ground", minimum=0.0, auto=True)
+    mechanics: str = param("overdamped", "overdamped: the mobility model ζ M v = F, the paper's (with Coulomb friction "
+                           "the friction-dominated regime); inertial: symplectic Euler with lumped mass",
+                           choices=("overdamped", "inertial"))  # fmt: skip
+    drag: float = param(60.0, "overdamped mechanics: drag ζ per unit mass, a property of the medium, the same at every "
+                        "level (60 ≈ 2 η_ground of the level-4 sphere); auto (0) = 2 η_ground of the mesh, which the "
+                        "explicit contact needs", minimum=0.0, auto=True)  # fmt: skip
     drag_frame: str = param("lab", "overdamped mechanics: lab: the drag brakes every motion; body: it acts on the velocity "
                             "relative to the body's horizontal translation, which the friction alone sets (needs "
                             "contact_solve=implicit)", choices=("lab", "body"))  # fmt: skip
