@@ -47,6 +47,7 @@ from wavewarp.waves import FitzHughNagumo  # noqa: E402
 
 RADIUS, THICKNESS, AC, MU_V = 25.0, 2.1, 0.1, 0.4  # the sphere walker (scenes/sphere_walker.py)
 WALKER = vars(WalkerParameters())
+PAPER_SHARPNESS = 0.1  # the paper's friction regularisation k_f (the explicit ground needs a finite one)
 
 
 def seconds_per_call(call, device, budget: float, repeats: int = 5) -> float:
@@ -93,9 +94,11 @@ def walker_shell(level: int, device, dtype, deterministic=False, volume=True, **
 
 
 def walker_ground() -> Ground:
-    """The walkers' default ground (docs/theory/dynamics.md, per limit point)."""
+    """The inertial walker's ground (docs/theory/dynamics.md, per limit point): the scenes' contact law with
+    the paper's friction regularisation k_f = 0.1, solved explicitly (the walkers' own default is the
+    implicit Coulomb ground: the implicit rows time it)."""
     return Ground(stiffness=WALKER["stiffness"], damping=WALKER["contact_damping"], friction=WALKER["friction"],
-                  sharpness=WALKER["sharpness"])  # fmt: skip
+                  sharpness=PAPER_SHARPNESS)  # fmt: skip
 
 
 def dynamics_of(shell, omega=None):

@@ -51,14 +51,14 @@ from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.sweep import SweepSpec, local_cluster, sweep  # noqa: E402
 
 SCENES = ("sphere-walker", "prism-walker", "cube-walker")
-OVERDAMPED = ["mechanics=overdamped", "contact_solve=implicit"]
+OVERDAMPED = ["mechanics=overdamped", "contact_solve=implicit", "drag=0"]  # drag 2 η_ground, as the committed tables
 REGIMES = {
     # inertial, friction a weak viscous drag (the paper's k_f = 0.1)
     "inertial-explicit-kf0.1": ["mechanics=inertial", "contact_solve=explicit", "sharpness=0.1"],
     "inertial-implicit-coulomb": ["mechanics=inertial", "contact_solve=implicit", "sharpness=inf"],
     # overdamped at the default drag ζ = 2 η_ground ≈ 61: ζ / (μ k_f g) from 1.2e4 (k_f = 0.1) to 0 (Coulomb)
     **{f"overdamped-implicit-kf{k}": [*OVERDAMPED, f"sharpness={k}"] for k in ("0.1", "1", "10", "100", "1000", "1e4")},
-    "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],  # the scenes' defaults
+    "overdamped-implicit-coulomb": [*OVERDAMPED, "sharpness=inf"],  # the scenes' defaults but for ζ (60 there)
     # less drag: is the crawl drag-limited (its speed ∝ 1/ζ) or set by the friction?
     "overdamped-implicit-coulomb-drag20": [*OVERDAMPED, "sharpness=inf", "drag=20"],
     "overdamped-implicit-coulomb-drag6": [*OVERDAMPED, "sharpness=inf", "drag=6"],
