@@ -96,7 +96,7 @@ def walker_shell(level: int, device, dtype, deterministic=False, volume=True, **
 def walker_ground() -> Ground:
     """The inertial walker's ground (docs/theory/dynamics.md, per limit point): the scenes' contact law with
     the paper's friction regularisation k_f = 0.1, solved explicitly (the walkers' own default is the
-    implicit Coulomb ground: the implicit rows time it)."""
+    implicit Coulomb ground; the "implicit ground" row times this ground solved implicitly)."""
     return Ground(stiffness=WALKER["stiffness"], damping=WALKER["contact_damping"], friction=WALKER["friction"],
                   sharpness=PAPER_SHARPNESS)  # fmt: skip
 

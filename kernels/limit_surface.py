@@ -57,13 +57,6 @@ def patch_jet(
 
 
 @wp.func
-def jet_force(b: Any, g: Any, g1: Any, g2: Any, g11: Any, g12: Any, g22: Any):
-    """`patch_jet` transposed for one patch vertex: a point's gradient jet (with respect to x, x,1, x,2, x,11,
-    x,12, x,22) contracted with the vertex's basis row b, its share of the point's force."""
-    return b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
-
-
-@wp.func
 def first_form(x1: Any, x2: Any):
     """Metric a_αβ = a_α·a_β."""
     a12 = wp.dot(x1, x2)

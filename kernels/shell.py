@@ -19,7 +19,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .limit_surface import basis_row, entry_point, first_form, jet_force, patch_jet, patch_scalar, second_form
+from .limit_surface import basis_row, entry_point, first_form, patch_jet, patch_scalar, second_form
 from .reduce import block_add
 
 MAX_PATCH = wp.constant(18)  # control vertices of a patch (valence N + 6): vertices of valence up to 12
@@ -264,7 +264,8 @@ def triangle_forces(
         )  # fmt: skip
         for k in range(wp.static(MAX_PATCH)):  # unrolled: the accumulators stay in registers
             if k < size:
-                f = jet_force(basis[row, k], g, g1, g2, g11, g12, g22)
+                b = basis[row, k]
+                f = b[0] * g + b[1] * g1 + b[2] * g2 + b[3] * g11 + b[4] * g12 + b[5] * g22
                 for c in range(3):
                     accumulated[k, c] = accumulated[k, c] - f[c]
     return accumulated
@@ -314,43 +315,6 @@ def shell_forces_kernel(
             wp.atomic_add(forces, patch_vertices[start + k], force)
 
 
-@wp.func
-def quadrature_point_jet(
-    x: wp.array(dtype=Any),
-    patch_start: wp.array(dtype=wp.int32),
-    patch_vertices: wp.array(dtype=wp.int32),
-    triangle_type: wp.array(dtype=wp.int32),
-    basis: wp.array2d(dtype=Any),
-    points_per_triangle: int,
-    ref_metric: wp.array(dtype=Any),
-    ref_metric_inv: wp.array(dtype=Any),
-    ref_curvature: wp.array(dtype=Any),
-    ref_weight: wp.array(dtype=Any),
-    stretching_modulus: wp.array(dtype=Any),
-    bending_modulus: wp.array(dtype=Any),
-    nu: Any,
-    worlds: int,
-    weights: wp.array(dtype=Any),
-    moments: wp.array(dtype=VolumeMoments),
-    target: wp.array(dtype=wp.float64),
-    penalty: wp.array(dtype=wp.float64),
-    with_energy: int,
-    energy_density: wp.array(dtype=wp.float64),
-    q: int,
-):
-    """Quadrature point q's triangle, basis row and gradient jet (`point_gradient_jet`, its world's moduli
-    and volume terms)."""
-    w = q // (ref_weight.shape[0] // worlds)
-    t, row = basis_row(triangle_type, points_per_triangle, q)
-    centroid, pressure = world_volume_terms(x, moments, target, penalty, worlds, w)
-    g, g1, g2, g11, g12, g22 = point_gradient_jet(
-        x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
-        stretching_modulus[w], bending_modulus[w], nu, weights[q % points_per_triangle], centroid, pressure,
-        with_energy, energy_density,
-    )  # fmt: skip
-    return t, row, g, g1, g2, g11, g12, g22
-
-
 @wp.kernel
 def shell_force_jets_kernel(
     x: wp.array(dtype=Any),
@@ -378,10 +342,13 @@ def shell_force_jets_kernel(
     """As shell_forces_kernel, one thread per quadrature point, writing the point's gradient jet to
     `jets` for the deterministic `gather_forces_kernel` (no atomics)."""
     q = wp.tid()
-    t, row, g, g1, g2, g11, g12, g22 = quadrature_point_jet(
-        x, patch_start, patch_vertices, triangle_type, basis, points_per_triangle, ref_metric, ref_metric_inv,
-        ref_curvature, ref_weight, stretching_modulus, bending_modulus, nu, worlds, weights, moments, target, penalty,
-        with_energy, energy_density, q,
+    w = q // (ref_weight.shape[0] // worlds)
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    centroid, pressure = world_volume_terms(x, moments, target, penalty, worlds, w)
+    g, g1, g2, g11, g12, g22 = point_gradient_jet(
+        x, patch_start, patch_vertices, basis, t, row, q, ref_metric, ref_metric_inv, ref_curvature, ref_weight,
+        stretching_modulus[w], bending_modulus[w], nu, weights[q % points_per_triangle], centroid, pressure,
+        with_energy, energy_density,
     )  # fmt: skip
     jets[q, 0] = g
     jets[q, 1] = g1

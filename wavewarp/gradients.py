@@ -56,9 +56,9 @@ def adjoint(newton: NewtonFinish, x: np.ndarray, gradient: np.ndarray) -> np.nda
     g = gradient.ravel() - rigid.T @ (rigid @ gradient.ravel())
     inverse = ShiftedInverse(*newton.hessian(x), None)
     inverse.constrain(rigid)
-    lam = np.zeros_like(g)
+    lam = inverse.solve(g)
     for _ in range(REFINEMENTS):
-        residual = g - newton.hessian_action(x, lam) if lam.any() else g
+        residual = g - newton.hessian_action(x, lam)
         residual -= rigid.T @ (rigid @ residual)
         if np.linalg.norm(residual) <= 1e-12 * np.linalg.norm(g):
             break
