@@ -91,7 +91,7 @@ def test_each_world_of_a_batched_shell_has_its_own_shells_forces_energy_and_volu
 def quick_worlds():
     base = resolve(scene.Parameters, {"level": 1, "periods": 0.1, "frames": 2, "settle": 1.0, "dtype": "float64",
                                       "noise": 0.01, "contact_sweeps": 2})  # fmt: skip
-    return [replace(base, AC=0.1), replace(base, AC=0.2, mirror=True, mu_v=0.0, young=250.0, thickness=2.5)]
+    return [replace(base, AC=0.1), replace(base, AC=0.2, mirror=True, mu_v=0.0, young=250.0, thickness=2.5, elongation=1.15)]
 
 
 OVERDAMPED_BODY = {"mechanics": "overdamped", "contact_solve": "implicit", "drag_frame": "body"}
@@ -101,7 +101,8 @@ OVERDAMPED_BODY = {"mechanics": "overdamped", "contact_solve": "implicit", "drag
                                        pytest.param({"mechanics": "inertial"}, marks=pytest.mark.slow),
                                        pytest.param(OVERDAMPED_BODY, marks=pytest.mark.slow)])  # fmt: skip
 def test_each_world_of_a_walker_batch_equals_its_single_run_bit_for_bit(deterministic, device, mechanics):
-    """Two sphere walkers differing in AC, Y, h, μV, the wave's side and the noise seed: the batch's
+    """Two sphere walkers differing in AC, Y, h, μV, the rest shape's elongation, the wave's side and the noise
+    seed: the batch's
     positions, concentrations, trace and measurements of each world are those of its own WalkerRun
     (which settles with the batch's mechanics steps: the worlds share the strictest). With the drag in
     the body frame each world solves its own body velocity."""

@@ -1,7 +1,7 @@
 """Batched walkers (docs/theory/batches.md): N walker worlds of one mesh topology stepped together.
 
 The worlds' meshes form one `Mesh.union`; one Model holds them with per-world couplings and moduli
-(AC, AI, h, Y, μV), one State holds every world's x, v, c, w, and every solver steps all worlds in
+(AC, AI, h, Y, μV) and rest shapes (noise, elongation), one State holds every world's x, v, c, w, and every solver steps all worlds in
 the same launches and the same captured graph. Worlds never interact: every reduction (volume,
 rigid-body sums, the trace) is per world, so in deterministic float64 each world equals its own
 single run bit for bit (tests/test_batch.py). A world that blows up is stopped at the start of the
@@ -31,7 +31,7 @@ from .parameters import as_dict
 from .runs import WaveClock, imperfect, mean_edge
 from .walker import AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, settled_walker_dynamics, walker_model
 
-PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "mirror", "noise")  # and the seed: the rest is shared
+PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "mirror", "noise", "elongation")  # and the seed: the rest is shared
 
 
 def check_batch(ps: list) -> None:

@@ -21,6 +21,9 @@ from .driver import simulate
 from .device import resolve_device, set_deterministic
 from .geometry import limit_positions
 from .gradients import OBJECTIVES, PARAMETERS, check_differentiable, scene_gradient
+from .walker import WalkerParameters
+from .walker_gradients import OBJECTIVES as WALKER_OBJECTIVES, PARAMETERS as WALKER_PARAMETERS, STEPS as WALKER_STEPS
+from .walker_gradients import check_walker_differentiable, walker_gradient
 from .io import check_writable
 from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
@@ -219,7 +222,8 @@ def _usd_arguments(command) -> None:
 
 
 def _gradient(args) -> int:
-    """A quasi-static scene run to its end, then the gradient of its objective at the last equilibrium."""
+    """A quasi-static scene run to its end, then the gradient of its objective at the last equilibrium; a
+    walker's by central differences over the worlds of one batch."""
     wp.config.log_level = wp.LOG_WARNING
     module = load_scene(args.scene)
     resolve_device(args.device)
@@ -228,19 +232,36 @@ def _gradient(args) -> int:
     def report(message):
         print(f"wavewarp grad {module.NAME}: {message}", file=sys.stderr)
 
-    run = module.build(p, device=args.device, seed=args.seed, report=report)
-    check_differentiable(run, args.wrt, args.objective)
-    for _ in range(run.frames):
-        run.advance_frame()
-    result = scene_gradient(run, args.wrt, args.objective)
-    if args.json:
-        print(json.dumps({"scene": module.NAME, "objective_name": args.objective, "objective": result["objective"],
-                          "gradient": result["gradient"], "residual": result["residual"]}))  # fmt: skip
+    if issubclass(module.Parameters, WalkerParameters):
+        objective = args.objective or WALKER_OBJECTIVES[0]
+        check_walker_differentiable(args.wrt, objective, args.steps)
+        result = walker_gradient(module.build_batch, p, args.wrt, objective=objective, steps=args.steps, seed=args.seed,
+                                 device=args.device, report=report)  # fmt: skip
+        extra = {"agreement": result["agreement"], "steps": result["steps"], "period": result["period"]}
     else:
-        print(f"{args.objective} = {result['objective']:.10g}")
+        objective = args.objective or OBJECTIVES[0]
+        run = module.build(p, device=args.device, seed=args.seed, report=report)
+        check_differentiable(run, args.wrt, objective)
+        for _ in range(run.frames):
+            run.advance_frame()
+        result = scene_gradient(run, args.wrt, objective)
+        extra = {"residual": result["residual"]}
+    if args.json:
+        print(json.dumps({"scene": module.NAME, "objective_name": objective, "objective": result["objective"],
+                          "gradient": result["gradient"], **extra}))  # fmt: skip
+    else:
+        print(f"{objective} = {result['objective']:.10g}")
         for name, value in result["gradient"].items():
-            print(f"d {args.objective} / d {name} = {value:.10g}")
+            agreement = f"  (steps agree to {extra['agreement'][name]:.2g})" if "agreement" in extra else ""
+            print(f"d {objective} / d {name} = {value:.10g}{agreement}")
     return 0
+
+
+def _relative_steps(text: str) -> tuple:
+    try:
+        return tuple(float(step) for step in text.split(",") if step)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: relative steps separated by commas, e.g. 1e-4,1e-5") from None
 
 
 def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
@@ -289,12 +310,19 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
     _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)
-    grad = commands.add_parser("grad", help="gradient of a quasi-static scene's objective at its last equilibrium "
-                               "with respect to shell parameters (docs/theory/gradients.md)")  # fmt: skip
-    grad.add_argument("scene", help="a quasi-static scene (oocytes, wave guides, buckling) with --set sensitive=false")
+    grad = commands.add_parser("grad", help="gradient of a scene's objective with respect to shell parameters: a "
+                               "quasi-static scene's at its last equilibrium, a walker's walk by central differences "
+                               "over one batch (docs/theory/gradients.md)")  # fmt: skip
+    grad.add_argument("scene", help="a quasi-static scene (oocytes, wave guides, buckling) with --set sensitive=false, "
+                      "or a walker")  # fmt: skip
     grad.add_argument("--wrt", required=True, type=lambda text: [name for name in text.split(",") if name],
-                      metavar="NAME[,NAME...]", help=f"parameters: {', '.join(PARAMETERS)}")  # fmt: skip
-    grad.add_argument("--objective", default="height", help=f"one of: {', '.join(OBJECTIVES)} (default height)")
+                      metavar="NAME[,NAME...]", help=f"parameters: quasi-static {', '.join(PARAMETERS)}; walkers "
+                      f"{', '.join(WALKER_PARAMETERS)}")  # fmt: skip
+    grad.add_argument("--objective", default=None, help=f"quasi-static: {', '.join(OBJECTIVES)} (default); walkers: "
+                      f"{', '.join(WALKER_OBJECTIVES)} (default: the centre of mass's displacement along the wave, R)")
+    grad.add_argument("--steps", type=_relative_steps, default=WALKER_STEPS, metavar="S1,S2",
+                      help="walkers: relative steps of the central differences; the largest against the smallest is "
+                      f"the reported agreement (default {','.join(f'{s:g}' for s in WALKER_STEPS)})")  # fmt: skip
     grad.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a scene parameter")
     grad.add_argument("--device", default=None, help="cpu, cuda, cuda:N (default: CUDA when present)")
     grad.add_argument("--quick", action="store_true", help="the scene's reduced run")

@@ -91,6 +91,8 @@ class WalkerParameters:
     frames: int = param(48, "frames written between t = 0 and the end", minimum=1)
     noise: float = param(0.0, "random perturbation / R of the rest shape (seeded by --seed): an ensemble of gaits",
                          minimum=0.0)  # fmt: skip
+    elongation: float = param(1.0, "rest shape: the scene's shape stretched by this factor along x, the wave's "
+                              "direction (a shape parameter for gradients and sweeps)", positive=True)  # fmt: skip
     sensitive: bool = param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)")
     transport: str = transport_parameter()
     mirror: bool = param(False, "start the wave at the mirror image of the origin (x → -x)")
@@ -139,8 +141,10 @@ class Placement:
 
 
 def place_walker(mesh: Mesh, p, origin) -> Placement:
-    """`mesh` on the ground (`ground_lift`, started at lift - depth) with the wave's origin vertex nearest
-    `origin` (mirrored in x with `p.mirror`)."""
+    """`mesh`, stretched by `p.elongation` along x about x = 0, on the ground (`ground_lift`, started at lift -
+    depth) with the wave's origin vertex nearest `origin` (stretched alike; mirrored in x with `p.mirror`)."""
+    stretch = np.array([p.elongation, 1.0, 1.0])
+    mesh, origin = Mesh(mesh.vertices * stretch, mesh.triangles), stretch * np.asarray(origin, dtype=np.float64)
     area = limit_surface(mesh, device="cpu", dtype="float64").area.sum()
     weight = p.density * p.gravity * area
     per = 1.0

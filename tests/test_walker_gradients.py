@@ -1,0 +1,150 @@
+"""Walker gradients by central differences over one batch (wavewarp/walker_gradients.py): the worlds'
+differences against whole single runs, the steps' convergence, the horizon measures and the errors."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from wavewarp.benchmarks.gradient_horizon import growth_per_period, horizon, running_magnitude
+from wavewarp.benchmarks.inverse_design import ascend, log_step
+from wavewarp.cli import main
+from wavewarp.parameters import load_scene, resolve
+from wavewarp.walker import WalkerRun, place_walker, sphere_walker_recipe
+from wavewarp.walker_gradients import (WalkerGradientError, check_walker_differentiable, forward_distance,
+                                       perturbed_worlds, walker_gradient)  # fmt: skip
+
+# the quick sphere walker for a third of a period, in float64 (the gradient's dtype)
+SHORT = ["periods=0.3", "frames=1", "dtype=float64"]
+
+
+def quick_sphere(*overrides):
+    module = load_scene("sphere-walker")
+    return module, resolve(module.Parameters, module.QUICK, [*SHORT, *overrides])
+
+
+def test_perturbed_worlds_put_the_unperturbed_world_first_then_plus_and_minus_each_step():
+    _, p = quick_sphere()
+    worlds = perturbed_worlds(p, ["AC", "AI"], (1e-2, 1e-3))
+    assert [(name, sign) for name, _, sign, _ in worlds] == [(None, 0)] + [(n, s) for n in ("AC", "AI") for _ in range(2)
+                                                                        for s in (1, -1)]  # fmt: skip
+    assert worlds[0][3] == p
+    for name, delta, sign, q in worlds[1:]:
+        theta = getattr(p, name)
+        assert getattr(q, name) == pytest.approx(theta + sign * delta, rel=0, abs=1e-15)
+    assert [delta for name, delta, sign, _ in worlds if name == "AC" and sign == 1] == pytest.approx([1e-2 * p.AC, 1e-3 * p.AC])
+    assert [delta for name, delta, sign, _ in worlds if name == "AI" and sign == 1] == pytest.approx([1e-2, 1e-3])  # AI = 0
+
+
+def test_forward_distance_is_the_centre_of_mass_along_the_wave_in_radii():
+    t = np.linspace(0.0, 1.0, 5)
+    com = np.column_stack([3.0 * t, 7.0 * t, 1.0 - t]) + [1.0, 2.0, 3.0]
+    trace = np.column_stack([t, np.zeros(5), com, np.zeros((5, 3))])
+    assert forward_distance(trace, [1.0, 0.0, 0.0], 2.0) == pytest.approx(1.5 * t)
+    assert forward_distance(trace, [-1.0, 0.0, 0.0], 2.0) == pytest.approx(-1.5 * t)  # a mirrored walker
+
+
+@pytest.mark.parametrize("wrt, objective, steps, message", [
+    (["young", "density"], "distance", (1e-4,), "density"), ([], "distance", (1e-4,), "(nothing)"),
+    (["AC"], "height", (1e-4,), "objectives are distance"), (["AC"], "distance", (), "one or more"),
+    (["AC"], "distance", (0.5,), "between 0 and 0.5")])  # fmt: skip
+def test_gradients_that_cannot_be_taken_are_refused_with_the_fix(wrt, objective, steps, message):
+    with pytest.raises(WalkerGradientError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        check_walker_differentiable(wrt, objective, steps)
+
+
+def test_the_cli_refuses_a_walker_parameter_it_cannot_differentiate(capsys):
+    assert main(["grad", "sphere-walker", "--quick", "--wrt", "friction", "--device", "cpu"]) != 0
+    assert "AC, AI, thickness, young, mu_v" in capsys.readouterr().err
+
+
+def test_the_horizons_and_growth_of_made_up_derivatives():
+    t = np.linspace(0.0, 6.0, 6001)
+    exact = np.exp(t)
+    close = exact + 1e-3 * np.exp(2.0 * t)  # 1e-3 e^2t > 0.1 e^t from t = ln 100 on
+    assert horizon(t, exact, close, 0.1) == pytest.approx(np.log(100.0), abs=1e-3)
+    assert horizon(t, exact, exact, 1e-3) is None
+    assert running_magnitude(np.array([0.0, -2.0, 1.0])).tolist() == [2.0, 2.0, 2.0]  # floored at the first non-zero
+    wobbling = np.exp(0.5 * t) * (2.0 + np.cos(40.0 * t))  # 0.5 e-folds a period under a wobble
+    assert growth_per_period(t, wobbling) == pytest.approx(0.5, abs=0.02)
+    assert growth_per_period(t, np.where(t <= 3.0, np.exp(0.5 * t), 1e9), until=3.0) == pytest.approx(0.5, abs=1e-9)
+    assert growth_per_period(t, exact, until=0.9) is None  # under a period: the first rise, not a growth
+
+
+@pytest.mark.slow
+def test_the_batched_differences_equal_those_of_whole_single_runs_and_converge():
+    """The ±δ worlds of the batch against two separate single-world runs of the scene (each its own model and
+    wave) settled with the batch's mechanics steps, and the derivative's convergence from δ = 1e-4 to 1e-5."""
+    module, p = quick_sphere()
+    result = walker_gradient(module.build_batch, p, ["AC"], steps=(1e-4, 1e-5), device="cpu", report=lambda m: None)
+    assert result["agreement"]["AC"] < 1e-5  # measured 6e-9 (Coulomb friction, contact onsets: piecewise smooth)
+    delta = result["deltas"]["AC"][0]
+    ends = []
+    for sign in (1, -1):
+        q = resolve(module.Parameters, module.QUICK, [*SHORT, f"AC={p.AC + sign * delta!r}"])
+        mesh, options = sphere_walker_recipe(q, device="cpu", report=lambda m: None)
+        run = WalkerRun("single", mesh, q, device="cpu", mechanics_dt=result["settle_dt"], **options)
+        run.record(run.time, run.frame())
+        for _ in range(run.frames):
+            run.advance_frame()
+            run.record(run.time, run.frame())
+        ends.append(forward_distance(run.trace, run.forward, run.radius)[-1])
+    single = (ends[0] - ends[1]) / (2 * delta)
+    assert abs(single) > 1e-3 * abs(result["objective"]) / p.AC  # a derivative that matters
+    assert result["derivatives"]["AC"][0][-1] == pytest.approx(single, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_the_cli_prints_a_walkers_gradient_as_json(capsys):
+    assert main(["grad", "sphere-walker", "--quick", "--wrt", "AI", "--device", "cpu", "--json",
+                 *[f"--set={s}" for s in SHORT]]) == 0  # fmt: skip
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) >= {"objective", "gradient", "agreement", "steps"} and set(out["gradient"]) == {"AI"}
+    assert out["agreement"]["AI"] < 1e-3  # Coulomb friction and contact onsets: piecewise smooth in AI
+
+
+def test_the_design_ascent_reaches_the_maximum_of_a_known_objective():
+    """J = -(ln a - 1)² - (ln b + 0.5)², largest at a = e, b = e^-½, from (1, 1) with its exact gradient."""
+    def objective_and_gradient(theta):
+        a, b = theta["a"], theta["b"]
+        value = -((np.log(a) - 1.0) ** 2) - (np.log(b) + 0.5) ** 2
+        return value, {"a": -2.0 * (np.log(a) - 1.0) / a, "b": -2.0 * (np.log(b) + 0.5) / b}
+
+    history = ascend(objective_and_gradient, {"a": 1.0, "b": 1.0}, iterations=60, rate=0.3, report=lambda m: None)
+    accepted = [row["J"] for row in history if row["accepted"]]
+    assert accepted == sorted(accepted) and any(not row["accepted"] for row in history)  # it overshot and backed off
+    best = max(history, key=lambda row: row["J"])["theta"]
+    assert best["a"] == pytest.approx(np.e, rel=1e-2) and best["b"] == pytest.approx(np.exp(-0.5), rel=1e-2)
+    assert log_step({"a": 2.0, "b": 1.0}, {"a": 1.0, "b": -4.0}, 0.5) == pytest.approx({"a": 2.0 * np.exp(0.25), "b": np.exp(-0.5)})
+
+
+def test_the_elongation_stretches_the_rest_shape_along_the_wave_and_keeps_the_origin_vertex():
+    module, p = quick_sphere()
+    mesh, options = sphere_walker_recipe(p, device="cpu", report=lambda m: None)
+    plain, stretched = (place_walker(mesh, replace(p, elongation=e), options["origin"]) for e in (1.0, 1.25))
+    extent = [np.ptp(placed.mesh.vertices, axis=0) for placed in (plain, stretched)]
+    assert extent[1] == pytest.approx(extent[0] * [1.25, 1.0, 1.0], rel=1e-12)
+    assert stretched.origin_vertex == plain.origin_vertex
+    assert stretched.mesh.vertices[:, 0] == pytest.approx(1.25 * plain.mesh.vertices[:, 0], rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.slow
+def test_bench_gradient_horizon_quick_writes_its_horizons_and_chart(tmp_path):
+    assert main(["bench", "gradient_horizon", "--device", "cpu", "--quick", "--periods", "0.3", "--scenes",
+                 "sphere-walker", "--mechanics", "default", "--out", str(tmp_path)]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "gradient_horizon.json").read_text())
+    (run,) = result["runs"]
+    assert len(run["derivatives"]) == 3 and len(run["derivatives"][0]) == len(run["t_over_T"])
+    assert run["t_over_T"][-1] > 0.25 and (tmp_path / "gradient_horizon.png").stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_bench_inverse_design_quick_keeps_the_best_step_and_verifies_it(tmp_path):
+    assert main(["bench", "inverse_design", "--device", "cpu", "--quick", "--scene", "sphere-walker", "--periods", "0.3",
+                 "--iterations", "2", "--wrt", "AC", "--out", str(tmp_path)]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "inverse_design.json").read_text())
+    assert [row["iteration"] for row in result["history"]] == [0, 1]
+    assert result["best"]["J"] == max(row["J"] for row in result["history"] if row["accepted"])
+    # the batch's unperturbed world and the plain run differ only in the settling steps each chose
+    assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-3)
