@@ -15,7 +15,9 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, bilayer=True, report=report)
 
 
-def build_batch(ps, *, seeds, device=None, report=print):
-    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
+def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world;
+    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds)."""
     recipe = partial(sphere_walker_recipe, bilayer=True)
-    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report)
+    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report,
+                        mechanics_dt=mechanics_dt)

@@ -38,8 +38,10 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
                           report=report)  # fmt: skip
 
 
-def build_batch(ps, *, seeds, device=None, report=print):
-    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
+def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world;
+    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds)."""
     p = ps[0]
     recipe = partial(box_walker_recipe, make_box=cube, origins=ORIGINS, radius=p.edge / L_OVER_R)
-    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report)
+    return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report,
+                        mechanics_dt=mechanics_dt)

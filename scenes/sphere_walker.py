@@ -26,6 +26,8 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, report=report)
 
 
-def build_batch(ps, *, seeds, device=None, report=print):
-    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world."""
-    return walker_batch(NAME, sphere_walker_recipe, ps, seeds=seeds, device=device, report=report)
+def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None):
+    """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world;
+    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds)."""
+    return walker_batch(NAME, sphere_walker_recipe, ps, seeds=seeds, device=device, report=report,
+                        mechanics_dt=mechanics_dt)

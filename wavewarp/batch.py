@@ -92,11 +92,12 @@ class WorldsRun(WaveClock):
 
 class WalkerBatch(WorldsRun):
     """Walker worlds stepped together: `meshes` (one topology) and parameters `ps` one per world; `radius`,
-    `size`, `origin`, `bilayer`, `rule` as `WalkerRun`'s. The worlds share the chemistry's and the
-    mechanics' steps: the strictest world's bounds (ω the largest over every world)."""
+    `size`, `origin`, `bilayer`, `rule`, `mechanics_dt` as `WalkerRun`'s. The worlds share the chemistry's
+    and the mechanics' steps: the strictest world's bounds (ω the largest over every world), or
+    `mechanics_dt`."""
 
     def __init__(self, name: str, meshes: list, ps: list, *, radius: float, size: float, origin, bilayer: bool = False,
-                 rule: str = "3", device=None, report=print):  # fmt: skip
+                 rule: str = "3", device=None, mechanics_dt=None, report=print):  # fmt: skip
         ps = list(ps)
         check_batch(ps)
         if len(meshes) != len(ps):
@@ -112,7 +113,7 @@ class WalkerBatch(WorldsRun):
         self.model = walker_model(self.mesh, ps, placed[0].ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
         # settle_dt: the step (overdamped: the pair of steps) while settling; a single run given it settles alike
-        self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p)
+        self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p, mechanics_dt)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
         n = self.vertices = self.mesh.vertices_per_world
         self._slices = [slice(w * n, (w + 1) * n) for w in range(self.worlds)]
@@ -229,14 +230,14 @@ class WalkerBatch(WorldsRun):
                              self.period_kinetic), **self.rotation.measurements(placed.forward, w)}  # fmt: skip
 
 
-def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print) -> WalkerBatch:
+def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print, mechanics_dt=None) -> WalkerBatch:
     """A scene's walkers as one batch: `recipe(p, device=, report=)` gives the scene's noiseless mesh and
     options (`sphere_walker_recipe`, `box_walker_recipe`); world w is ps[w] with its rest shape
-    perturbed by ps[w].noise × radius, seeded by seeds[w]."""
+    perturbed by ps[w].noise × radius, seeded by seeds[w]; `mechanics_dt` as `WalkerBatch`'s."""
     ps, seeds = list(ps), [int(s) for s in seeds]
     if len(seeds) != len(ps):
         raise ValueError(f"a batch needs one seed per world: {len(seeds)} seeds for {len(ps)} parameter sets")
     check_batch(ps)
     mesh, options = recipe(ps[0], device=device, report=report)
     meshes = [imperfect(mesh, p.noise * options["radius"], seed) for p, seed in zip(ps, seeds)]
-    return WalkerBatch(name, meshes, ps, device=device, report=report, **options)
+    return WalkerBatch(name, meshes, ps, device=device, report=report, mechanics_dt=mechanics_dt, **options)

@@ -6,16 +6,21 @@ batch holds the worlds θ ± δ beside the unperturbed one; they share every che
 step (the strictest world's), so (J(θ+δ) - J(θ-δ)) / 2δ is the derivative of one discretisation.
 The run is in float64. Two steps per parameter measure whether the derivative has converged (their
 relative `agreement`), which is what fails past the horizon of a chaotic gait. The wave may depend on
-the shape (sensitive walkers): the differences go through the whole coupled run.
+the shape (sensitive walkers): the differences go through the whole coupled run. The ground's and the
+drag's parameters are one per batch: their ± worlds run as batches of one world each, with the main
+batch's steps.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import math
+from dataclasses import fields, replace
 
 import numpy as np
 
-PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v", "elongation")  # the batch's per-world shell and shape parameters
+PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "elongation")  # the batch's per-world shell and shape parameters
+SHARED = ("friction", "sharpness", "stiffness", "contact_damping", "drag")  # one ground and drag per batch
+PARAMETERS = PER_WORLD + SHARED
 OBJECTIVES = ("distance",)
 STEPS = (1e-4, 1e-5)  # relative steps of the central differences (absolute where θ = 0)
 
@@ -34,6 +39,24 @@ def check_walker_differentiable(wrt, objective: str = "distance", steps=STEPS) -
         raise WalkerGradientError(f"--objective {objective}: a walker's objectives are {', '.join(OBJECTIVES)}")
     if len(steps) < 1 or any(not 0.0 < step < 0.5 for step in steps):
         raise WalkerGradientError(f"steps {list(steps)}: give one or more relative steps between 0 and 0.5, e.g. 1e-3,1e-4")
+
+
+def check_walker_values(p, wrt, steps=STEPS) -> None:
+    """Raise WalkerGradientError, naming the fix, where a parameter's value leaves no central difference: Coulomb's
+    k_f = inf, an automatic 0, or θ - δ outside the parameter's valid range."""
+    meta = {f.name: f.metadata for f in fields(p)}
+    for name in wrt:
+        theta, check = float(getattr(p, name)), meta[name]
+        if name == "sharpness" and math.isinf(theta):
+            raise WalkerGradientError("sharpness = inf is Coulomb's law, which has no derivative in k_f: --set "
+                                      "sharpness=1e4 walks as Coulomb does (docs/studies/2026-11-27-walker-regime-scans.md)")  # fmt: skip
+        if check.get("auto") and theta == 0:
+            raise WalkerGradientError(f"{name} = 0 means automatic: give it a value (--set {name}=...)")
+        lowest = theta - max(steps) * (abs(theta) or 1.0)
+        minimum = 0.0 if check.get("positive") else check.get("minimum")
+        if minimum is not None and (lowest < minimum or (check.get("positive") and lowest <= 0)):
+            raise WalkerGradientError(f"{name} = {theta:g}: the central difference's θ - δ = {lowest:g} leaves its valid "
+                                      f"range (>= {minimum:g}); differentiate where {name} > {minimum:g}")  # fmt: skip
 
 
 def perturbed_worlds(p, wrt, steps) -> list:
@@ -57,8 +80,9 @@ def forward_distance(trace: np.ndarray, forward, radius: float) -> np.ndarray:
 
 def walker_gradient(build_batch, p, wrt, *, objective: str = "distance", steps=STEPS, seed: int = 0, device=None,
                     report=print) -> dict:  # fmt: skip
-    """dJ/dθ of a walker scene (`build_batch(ps, seeds=, device=, report=)`, a scene module's) at parameters
-    `p` for the parameters named in `wrt`, by central differences over one float64 batch.
+    """dJ/dθ of a walker scene (`build_batch(ps, seeds=, device=, report=, mechanics_dt=)`, a scene module's) at
+    parameters `p` for the parameters named in `wrt`, by central differences over one float64 batch (PER_WORLD),
+    and over batches of one world stepped as that batch (SHARED).
 
     Returns {"objective": J at the end, "gradient": {name: dJ/dθ with the smallest step}, "agreement": {name:
     |g(δ₁) - g(δ_k)| / |g(δ_k)|, the largest step against the smallest}, "steps", "deltas": {name: [δ...]},
@@ -67,17 +91,19 @@ def walker_gradient(build_batch, p, wrt, *, objective: str = "distance", steps=S
     "period_kinetic": the FHN kinetics' period, "settle_dt": the mechanics steps the worlds settled and walk with
     (`WalkerRun`'s `mechanics_dt`)}."""
     check_walker_differentiable(wrt, objective, steps)
+    check_walker_values(p, wrt, steps)
     p = replace(p, dtype="float64")
-    worlds = perturbed_worlds(p, wrt, steps)
+    worlds = perturbed_worlds(p, [name for name in wrt if name in PER_WORLD], steps)
     batch = build_batch([q for *_, q in worlds], seeds=[seed] * len(worlds), device=device, report=report)
-    results = batch.run()
-    stopped = [(w, result["stopped"]) for w, result in enumerate(results) if result["status"] != "done"]
-    if stopped:
-        w, error = stopped[0]
-        raise WalkerGradientError(f"world {w} ({worlds[w][0] or 'unperturbed'}) stopped: {error}; the differences "
-                                  "need every world to finish: a smaller step (--set dt=...) or shorter run")  # fmt: skip
-    forward = batch.placed[0].forward
-    distances = [forward_distance(trace, forward, batch.radius) for trace in batch.traces]
+    forward, radius = batch.placed[0].forward, batch.radius
+    distances = [forward_distance(trace, forward, radius) for trace in finished(batch, worlds)]
+    # the shared parameters' worlds: one batch each, stepped as the main batch
+    pinned = replace(p, dt=batch.wave.dt)
+    for name, delta, sign, q in perturbed_worlds(pinned, [name for name in wrt if name in SHARED], steps)[1:]:
+        alone = build_batch([q], seeds=[seed], device=device, report=report, mechanics_dt=batch.settle_dt)
+        (trace,) = finished(alone, [(name, delta, sign, q)])
+        worlds.append((name, delta, sign, q))
+        distances.append(forward_distance(trace, forward, radius))
     derivatives, deltas = {name: [] for name in wrt}, {name: [] for name in wrt}
     for w in range(1, len(worlds), 2):
         name, delta, _, _ = worlds[w]
@@ -88,5 +114,16 @@ def walker_gradient(build_batch, p, wrt, *, objective: str = "distance", steps=S
                  for name, series in derivatives.items()}  # fmt: skip
     return {"objective": float(distances[0][-1]), "gradient": gradient, "agreement": agreement, "steps": list(steps),
             "deltas": deltas, "times": batch.traces[0][:, 0], "distance": distances[0], "derivatives": derivatives,
-            "period": results[0]["measurements"]["period"], "period_kinetic": batch.period_kinetic,
+            "period": batch.measurements(0, batch.time)["period"], "period_kinetic": batch.period_kinetic,
             "settle_dt": batch.settle_dt}  # fmt: skip
+
+
+def finished(batch, worlds) -> list:
+    """Run `batch` (its worlds described by `worlds`, as `perturbed_worlds` gives them); every world's trace, or
+    WalkerGradientError where one stopped."""
+    for w, result in enumerate(batch.run()):
+        if result["status"] != "done":
+            raise WalkerGradientError(f"the world {worlds[w][0] or 'unperturbed'} {worlds[w][1]:+g} stopped: "
+                                      f"{result['stopped']}; the differences need every world to finish: a smaller "
+                                      "chemistry step (--set dt=...) or a shorter run")  # fmt: skip
+    return batch.traces
