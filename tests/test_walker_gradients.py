@@ -164,3 +164,13 @@ def test_bench_inverse_design_quick_keeps_the_best_step_and_verifies_it(tmp_path
     assert result["best"]["J"] == max(row["J"] for row in result["history"] if row["accepted"])
     # the batch's unperturbed world and the plain run differ only in the settling steps each chose
     assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-3)
+
+
+@pytest.mark.slow
+def test_bench_gradient_cost_quick_times_the_gradient_against_its_forward_run(tmp_path):
+    assert main(["bench", "gradient_cost", "--device", "cpu", "--quick", "--periods", "0.2", "--wrt", "AC",
+                 "--out", str(tmp_path)]) == 0  # fmt: skip
+    rows = json.loads((tmp_path / "gradient_cost.json").read_text())["rows"]
+    assert [(r["parameters"], r["worlds"]) for r in rows] == [(0, 1), (1, 3)]
+    assert rows[0]["ratio"] == 1.0 and rows[1]["ratio"] == pytest.approx(rows[1]["seconds"] / rows[0]["seconds"])
+    assert rows[1]["bytes"] is None  # device memory is a GPU's
