@@ -13,7 +13,7 @@ from wavewarp.cli import main
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.walker import WalkerRun, place_walker, sphere_walker_recipe
 from wavewarp.walker_gradients import (WalkerGradientError, check_walker_differentiable, check_walker_values,
-                                       forward_distance, perturbed_worlds, walker_gradient)  # fmt: skip
+                                       forward_distance, objective_value, perturbed_worlds, walker_gradient)  # fmt: skip
 
 # the quick sphere walker for a third of a period, in float64 (the gradient's dtype)
 SHORT = ["periods=0.3", "frames=1", "dtype=float64"]
@@ -174,3 +174,18 @@ def test_bench_gradient_cost_quick_times_the_gradient_against_its_forward_run(tm
     assert [(r["parameters"], r["worlds"]) for r in rows] == [(0, 1), (1, 3)]
     assert rows[0]["ratio"] == 1.0 and rows[1]["ratio"] == pytest.approx(rows[1]["seconds"] / rows[0]["seconds"])
     assert rows[1]["bytes"] is None  # device memory is a GPU's
+
+
+def test_the_speed_objective_is_the_walk_per_measured_period():
+    """c at the origin pulses with period 40 (upward half-maximum crossings), the centre moves at 0.003 per unit
+    time along x: 0.12 per period, 0.06 R per period for R = 2; one pulse is refused."""
+    t = np.linspace(0.0, 200.0, 20001)
+    c = np.sin(2 * np.pi * t / 40.0)
+    com = np.column_stack([0.003 * t, np.zeros_like(t), np.ones_like(t)])
+    trace = np.column_stack([t, c, com, com - [1.0, 0.0, 0.0]])  # the origin vertex behind the centre
+    distance = forward_distance(trace, [1.0, 0.0, 0.0], 2.0)
+    assert objective_value("speed", trace, distance, [1.0, 0.0, 0.0], 2.0, 40.0) == pytest.approx(0.06, rel=1e-9)
+    assert objective_value("distance", trace, distance, [1.0, 0.0, 0.0], 2.0, 40.0) == pytest.approx(0.3)
+    short = t <= 30.0  # one crossing, at t = 40/12
+    with pytest.raises(WalkerGradientError, match="periods=2"):
+        objective_value("speed", trace[short], distance[short], [1.0, 0.0, 0.0], 2.0, 40.0)

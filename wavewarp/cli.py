@@ -238,6 +238,11 @@ def _gradient(args) -> int:
         result = walker_gradient(module.build_batch, p, args.wrt, objective=objective, steps=args.steps, seed=args.seed,
                                  device=args.device, report=report)  # fmt: skip
         extra = {"agreement": result["agreement"], "steps": result["steps"], "period": result["period"]}
+        for name, agreement in result["agreement"].items():
+            if agreement > UNCONVERGED:
+                report(f"d{objective}/d{name}: the steps {result['steps']} disagree by {agreement:.2g} — past the "
+                       "gradient's horizon or at a kink of the walk (docs/theory/gradients.md): a shorter run "
+                       "(--set periods=...) or smaller --steps")  # fmt: skip
     else:
         objective = args.objective or OBJECTIVES[0]
         run = module.build(p, device=args.device, seed=args.seed, report=report)
@@ -255,6 +260,9 @@ def _gradient(args) -> int:
             agreement = f"  (steps agree to {extra['agreement'][name]:.2g})" if "agreement" in extra else ""
             print(f"d {objective} / d {name} = {value:.10g}{agreement}")
     return 0
+
+
+UNCONVERGED = 1e-3  # walkers: the steps' relative disagreement above which `wavewarp grad` warns
 
 
 def _relative_steps(text: str) -> tuple:

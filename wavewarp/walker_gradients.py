@@ -18,10 +18,12 @@ from dataclasses import fields, replace
 
 import numpy as np
 
+from .measurements import locomotion
+
 PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "elongation")  # the batch's per-world shell and shape parameters
 SHARED = ("friction", "sharpness", "stiffness", "contact_damping", "drag")  # one ground and drag per batch
 PARAMETERS = PER_WORLD + SHARED
-OBJECTIVES = ("distance",)
+OBJECTIVES = ("distance", "speed")  # R along the wave at the end; R per measured period between the first and last pulse
 STEPS = (1e-4, 1e-5)  # relative steps of the central differences (absolute where θ = 0)
 
 
@@ -84,10 +86,10 @@ def walker_gradient(build_batch, p, wrt, *, objective: str = "distance", steps=S
     parameters `p` for the parameters named in `wrt`, by central differences over one float64 batch (PER_WORLD),
     and over batches of one world stepped as that batch (SHARED).
 
-    Returns {"objective": J at the end, "gradient": {name: dJ/dθ with the smallest step}, "agreement": {name:
-    |g(δ₁) - g(δ_k)| / |g(δ_k)|, the largest step against the smallest}, "steps", "deltas": {name: [δ...]},
-    "times": chemistry times, "distance": J(t) of the unperturbed world, "derivatives": {name: [dJ/dθ(t)
-    per step]}, "period": the unperturbed world's measured period (None if fewer than two pulses),
+    Returns {"objective": J (`objective`: the distance at the end, or the speed), "gradient": {name: dJ/dθ with the
+    smallest step}, "agreement": {name: |g(δ₁) - g(δ_k)| / |g(δ_k)|, the largest step against the smallest},
+    "steps", "deltas": {name: [δ...]}, "times": chemistry times, "distance": the distance D(t) of the
+    unperturbed world, "derivatives": {name: [dD/dθ(t) per step]}, "period": the unperturbed world's measured period (None if fewer than two pulses),
     "period_kinetic": the FHN kinetics' period, "settle_dt": the mechanics steps the worlds settled and walk with
     (`WalkerRun`'s `mechanics_dt`)}."""
     check_walker_differentiable(wrt, objective, steps)
@@ -96,26 +98,41 @@ def walker_gradient(build_batch, p, wrt, *, objective: str = "distance", steps=S
     worlds = perturbed_worlds(p, [name for name in wrt if name in PER_WORLD], steps)
     batch = build_batch([q for *_, q in worlds], seeds=[seed] * len(worlds), device=device, report=report)
     forward, radius = batch.placed[0].forward, batch.radius
-    distances = [forward_distance(trace, forward, radius) for trace in finished(batch, worlds)]
+    traces = list(finished(batch, worlds))
     # the shared parameters' worlds: one batch each, stepped as the main batch
     pinned = replace(p, dt=batch.wave.dt)
     for name, delta, sign, q in perturbed_worlds(pinned, [name for name in wrt if name in SHARED], steps)[1:]:
         alone = build_batch([q], seeds=[seed], device=device, report=report, mechanics_dt=batch.settle_dt)
-        (trace,) = finished(alone, [(name, delta, sign, q)])
+        traces += finished(alone, [(name, delta, sign, q)])
         worlds.append((name, delta, sign, q))
-        distances.append(forward_distance(trace, forward, radius))
-    derivatives, deltas = {name: [] for name in wrt}, {name: [] for name in wrt}
+    distances = [forward_distance(trace, forward, radius) for trace in traces]
+    ends = [objective_value(objective, trace, distance, forward, radius, batch.period_kinetic)
+            for trace, distance in zip(traces, distances)]  # fmt: skip
+    derivatives, deltas, differences = {name: [] for name in wrt}, {name: [] for name in wrt}, {name: [] for name in wrt}
     for w in range(1, len(worlds), 2):
         name, delta, _, _ = worlds[w]
         derivatives[name].append((distances[w] - distances[w + 1]) / (2.0 * delta))
+        differences[name].append((ends[w] - ends[w + 1]) / (2.0 * delta))
         deltas[name].append(delta)
-    gradient = {name: float(series[-1][-1]) for name, series in derivatives.items()}
-    agreement = {name: float(abs(series[0][-1] - series[-1][-1]) / max(abs(series[-1][-1]), 1e-300))
-                 for name, series in derivatives.items()}  # fmt: skip
-    return {"objective": float(distances[0][-1]), "gradient": gradient, "agreement": agreement, "steps": list(steps),
+    gradient = {name: float(values[-1]) for name, values in differences.items()}
+    agreement = {name: float(abs(values[0] - values[-1]) / max(abs(values[-1]), 1e-300))
+                 for name, values in differences.items()}  # fmt: skip
+    return {"objective": float(ends[0]), "gradient": gradient, "agreement": agreement, "steps": list(steps),
             "deltas": deltas, "times": batch.traces[0][:, 0], "distance": distances[0], "derivatives": derivatives,
             "period": batch.measurements(0, batch.time)["period"], "period_kinetic": batch.period_kinetic,
             "settle_dt": batch.settle_dt}  # fmt: skip
+
+
+def objective_value(objective: str, trace: np.ndarray, distance: np.ndarray, forward, radius: float,
+                    period_kinetic: float) -> float:  # fmt: skip
+    """A world's objective: its `distance` at the end, or its speed (R per measured period, `locomotion`'s)."""
+    if objective == "distance":
+        return float(distance[-1])
+    speed = locomotion(trace, forward, radius, 0.0, period_kinetic)["speed_R_per_T"]
+    if speed is None:
+        raise WalkerGradientError("the speed is measured between the first and the last pulse, and this run has fewer "
+                                  "than two: --set periods=2 or more, or --objective distance")  # fmt: skip
+    return float(speed)
 
 
 def finished(batch, worlds) -> list:
