@@ -1,13 +1,14 @@
-"""How far a walker's gradient reaches (issue 31, chaos): dJ/dAC of the walk J(t) (the centre of mass's
-displacement along the wave, R) against the horizon t, by central differences with AC steps from
-1e-2 to 1e-6 of AC over one float64 batch per scene and mechanics (wavewarp/walker_gradients.py).
+"""How far a walker's gradient reaches (issue 31, chaos): dJ/dθ of the walk J(t) (the centre of mass's
+displacement along the wave, R) against the horizon t, by central differences with steps from 1e-2 to
+1e-6 of θ (`--wrt`, default AC) over one float64 batch per scene and mechanics
+(wavewarp/walker_gradients.py).
 
     wavewarp bench gradient_horizon --device cuda --periods 6 --out benchmarks/results/gradient_horizon
 
-Per run: the derivative's running magnitude max_{s≤t} |g(s)| and its growth per period (up to the
-converged horizon); the *useful
+Per run: the derivative's running magnitude max_{s≤t} |g(s)| (floored at 1% of the run's largest) and its
+growth per period (up to the converged horizon); the *useful
 horizon*, the first time the largest step's difference departs from the smallest step's derivative by
-more than 10% of that magnitude (beyond it a step of 1% of AC is no longer linear); and the
+more than 10% of that magnitude (beyond it a step of 1% of θ is no longer linear); and the
 *converged horizon*, the same for the two smallest steps at 1e-3 (beyond it the derivative itself is
 not resolved: chaos at the scale of round-off). Writes gradient_horizon.json and .png.
 """
@@ -28,12 +29,13 @@ if __package__ in (None, ""):
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
-from wavewarp.walker_gradients import walker_gradient  # noqa: E402
+from wavewarp.walker_gradients import PER_WORLD, walker_gradient  # noqa: E402
 
 SCENES = ("sphere-walker", "prism-walker")
 MECHANICS = {"default": [], "inertial": ["mechanics=inertial", "contact_solve=explicit", "sharpness=0.1"]}
 STEPS = (1e-2, 1e-4, 1e-6)
 USEFUL, CONVERGED = 0.1, 1e-3  # departures (relative to the running magnitude) that end each horizon
+FLOOR = 0.01  # the running magnitude's floor, a share of the run's largest |dJ/dθ|
 
 
 def running_magnitude(series: np.ndarray) -> np.ndarray:
@@ -44,8 +46,10 @@ def running_magnitude(series: np.ndarray) -> np.ndarray:
 
 
 def horizon(times: np.ndarray, reference: np.ndarray, other: np.ndarray, tolerance: float):
-    """The first time |other - reference| exceeds `tolerance` × the running magnitude of reference (None: never)."""
-    departed = np.abs(other - reference) > tolerance * running_magnitude(reference)
+    """The first time |other - reference| exceeds `tolerance` × the running magnitude of reference, that magnitude
+    floored at FLOOR of its largest over the run (the derivative's first rise from 0 is not a horizon); None: never."""
+    scale = np.maximum(running_magnitude(reference), FLOOR * np.abs(reference).max())
+    departed = np.abs(other - reference) > tolerance * scale
     return float(times[np.argmax(departed)]) if departed.any() else None
 
 
@@ -61,20 +65,20 @@ def growth_per_period(t_over_T: np.ndarray, series: np.ndarray, until: float | N
 
 
 def measure(scene: str, mechanics: str, args, device) -> dict:
-    """One scene and mechanics: the AC derivative against the horizon for every step."""
+    """One scene and mechanics: the derivative in `args.wrt` against the horizon for every step."""
     module = load_scene(scene)
     p = resolve(module.Parameters, getattr(module, "QUICK", {}) if args.quick else None,
                 [*MECHANICS[mechanics], f"periods={args.periods}", f"sensitive={args.sensitive}", *args.set])  # fmt: skip
     p = replace(p, frames=max(1, round(args.periods)))
-    result = walker_gradient(module.build_batch, p, ["AC"], steps=args.steps, device=device, report=lambda m: None)
+    result = walker_gradient(module.build_batch, p, [args.wrt], steps=args.steps, device=device, report=lambda m: None)
     t = result["times"] / (result["period"] or result["period_kinetic"])  # the measured period, else the kinetics'
-    series = result["derivatives"]["AC"]
+    series = result["derivatives"][args.wrt]
     smallest, second, largest = series[-1], series[-2] if len(series) > 1 else series[-1], series[0]
     useful, converged = horizon(t, smallest, largest, USEFUL), horizon(t, smallest, second, CONVERGED)
     stride = max(1, len(t) // 400)  # the chart's and the JSON's samples
     label = " ".join([mechanics, *args.set])
-    return {"scene": scene, "mechanics": mechanics, "label": label, "AC": p.AC, "period": result["period"], "distance_R": result["objective"],
-            "gradient_end": result["gradient"]["AC"], "steps": list(args.steps), "useful_horizon_T": useful,
+    return {"scene": scene, "mechanics": mechanics, "label": label, "wrt": args.wrt, "value": getattr(p, args.wrt), "period": result["period"], "distance_R": result["objective"],
+            "gradient_end": result["gradient"][args.wrt], "steps": list(args.steps), "useful_horizon_T": useful,
             "converged_horizon_T": converged, "growth_per_period": growth_per_period(t, smallest, converged),
             "t_over_T": t[::stride].tolist(), "derivatives": [s[::stride].tolist() for s in series],
             "distance": result["distance"][::stride].tolist()}  # fmt: skip
@@ -90,15 +94,15 @@ def chart(result: dict, path: str) -> None:
     for ax, run in zip(axes[0], runs):
         t = np.asarray(run["t_over_T"])
         for step, series, color in zip(run["steps"], run["derivatives"], colors):
-            ax.semilogy(t, np.abs(series), color=color, lw=1.2, label=f"step {step:g} AC")
+            ax.semilogy(t, np.abs(series), color=color, lw=1.2, label=f"step {step:g} {run['wrt']}")
         for key, style in (("useful_horizon_T", "--"), ("converged_horizon_T", ":")):
             if run[key] is not None:
                 ax.axvline(run[key], color="k", ls=style, lw=0.8, label=key.replace("_T", "").replace("_", " "))
         growth = run["growth_per_period"]
-        grows = "" if growth is None else f": |dJ/dAC| grows {growth:+.2f} e-folds / T"
+        grows = "" if growth is None else f": grows {growth:+.2f} e-folds / T"
         ax.set_title(f"{run['scene']}, {run['label']}{grows}", fontsize=9)
         ax.set_xlabel("horizon t / T")
-        ax.set_ylabel("|dJ/dAC| (J: displacement along the wave, R)")
+        ax.set_ylabel(f"|dJ/d{run['wrt']}| (J: displacement along the wave, R)")
         ax.legend(fontsize=7)
     fig.suptitle(f"walker gradients against the horizon, {result['device_name']}", fontsize=10)
     fig.tight_layout()
@@ -111,7 +115,8 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", nargs="+", choices=SCENES, default=list(SCENES))
     parser.add_argument("--mechanics", nargs="+", choices=tuple(MECHANICS), default=list(MECHANICS))
     parser.add_argument("--periods", type=float, default=6.0)
-    parser.add_argument("--steps", nargs="+", type=float, default=list(STEPS), help="relative AC steps, largest first")
+    parser.add_argument("--wrt", choices=PER_WORLD, default="AC", help="the parameter θ (a per-world one)")
+    parser.add_argument("--steps", nargs="+", type=float, default=list(STEPS), help="relative steps of θ, largest first")
     parser.add_argument("--sensitive", choices=("true", "false"), default="true")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed for every run")
     parser.add_argument("--quick", action="store_true", help="the scenes' quick meshes (a CPU smoke run)")
@@ -122,7 +127,7 @@ def main(argv=None) -> int:
     for scene in args.scenes:
         for mechanics in args.mechanics:
             run = measure(scene, mechanics, args, device)
-            print(f"{scene} {run['label']}: dJ/dAC at the end {run['gradient_end']:+.4g}, useful horizon "
+            print(f"{scene} {run['label']}: dJ/d{args.wrt} at the end {run['gradient_end']:+.4g}, useful horizon "
                   f"{run['useful_horizon_T']} T, converged {run['converged_horizon_T']} T, growth "
                   f"{run['growth_per_period']} e-folds a period")  # fmt: skip
             runs.append(run)

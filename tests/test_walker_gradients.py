@@ -77,6 +77,8 @@ def test_the_horizons_and_growth_of_made_up_derivatives():
     close = exact + 1e-3 * np.exp(2.0 * t)  # 1e-3 e^2t > 0.1 e^t from t = ln 100 on
     assert horizon(t, exact, close, 0.1) == pytest.approx(np.log(100.0), abs=1e-3)
     assert horizon(t, exact, exact, 1e-3) is None
+    early = exact + np.where(t < 0.5, 0.3, 0.0)  # 18-30% off while |g| < 1% of its largest: the first rise, no horizon
+    assert horizon(t, exact, early, 0.1) is None
     assert running_magnitude(np.array([0.0, -2.0, 1.0])).tolist() == [2.0, 2.0, 2.0]  # floored at the first non-zero
     wobbling = np.exp(0.5 * t) * (2.0 + np.cos(40.0 * t))  # 0.5 e-folds a period under a wobble
     assert growth_per_period(t, wobbling) == pytest.approx(0.5, abs=0.02)
