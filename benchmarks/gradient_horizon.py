@@ -76,7 +76,7 @@ def measure(scene: str, mechanics: str, args, device) -> dict:
     smallest, second, largest = series[-1], series[-2] if len(series) > 1 else series[-1], series[0]
     useful, converged = horizon(t, smallest, largest, USEFUL), horizon(t, smallest, second, CONVERGED)
     stride = max(1, len(t) // 400)  # the chart's and the JSON's samples
-    label = " ".join([mechanics, *args.set])
+    label = " ".join([mechanics, *args.set, *(["insensitive"] if args.sensitive == "false" else [])])
     return {"scene": scene, "mechanics": mechanics, "label": label, "wrt": args.wrt, "value": getattr(p, args.wrt), "period": result["period"], "distance_R": result["objective"],
             "gradient_end": result["gradient"][args.wrt], "steps": list(args.steps), "useful_horizon_T": useful,
             "converged_horizon_T": converged, "growth_per_period": growth_per_period(t, smallest, converged),
