@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 import warp as wp
 
+from wavewarp.batch import check_batch
 from wavewarp.device import set_deterministic
 from wavewarp.driver import simulate
 from wavewarp.geometry import patch_tables
 from wavewarp.mesh import Mesh, icosphere
-from wavewarp.parameters import resolve
+from wavewarp.parameters import load_scene, resolve
 from wavewarp.relax import RelaxationError
 from wavewarp.runs import imperfect
 from wavewarp.scenes import sphere_walker as scene
@@ -155,8 +156,12 @@ def test_a_world_that_blows_up_stops_alone(deterministic, device):
 
 def test_a_batch_refuses_worlds_that_differ_in_a_shared_parameter():
     ps = quick_worlds()
-    with pytest.raises(ValueError, match="world 1 differs from world 0 in gamma"):
+    with pytest.raises(ValueError, match="world 1 differs from world 0 in gamma") as walker:
         scene.build_batch([ps[0], replace(ps[0], gamma=0.3)], seeds=[0, 0], device="cpu")
+    assert "mu_v, noise, elongation, mirror (and the seed)" in str(walker.value)
+    quasi_static = resolve(load_scene("buckling-modes").Parameters, None, [])
+    with pytest.raises(ValueError, match="but young, thickness, AC, AI, mu_v, noise \\(and the seed\\)"):
+        check_batch([quasi_static, replace(quasi_static, gamma=0.3)])  # names only the scene's own
 
 
 def test_batched_shell_parameters_take_one_value_or_one_per_world():

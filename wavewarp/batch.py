@@ -39,12 +39,13 @@ def check_batch(ps: list) -> None:
     if not ps:
         raise ValueError("a batch needs at least one world")
     first = ps[0]
+    own = [f.name for f in fields(first) if f.name in PER_WORLD]  # the scene's per-world parameters
     for w, p in enumerate(ps[1:], 1):
         differ = [f.name for f in fields(first)
                   if f.name not in PER_WORLD and getattr(p, f.name) != getattr(first, f.name)]  # fmt: skip
         if differ:
             raise ValueError(f"world {w} differs from world 0 in {', '.join(differ)}: the worlds of a batch share "
-                             f"every parameter but {', '.join(PER_WORLD)} (and the seed); run the others in another "
+                             f"every parameter but {', '.join(own)} (and the seed); run the others in another "
                              "batch")  # fmt: skip
 
 
