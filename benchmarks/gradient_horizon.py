@@ -29,12 +29,12 @@ if __package__ in (None, ""):
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
-from wavewarp.walker_gradients import PER_WORLD, walker_gradient  # noqa: E402
+from wavewarp.walker_gradients import AGREEMENT, PER_WORLD, walker_gradient  # noqa: E402
 
 SCENES = ("sphere-walker", "prism-walker")
 MECHANICS = {"default": [], "inertial": ["mechanics=inertial", "contact_solve=explicit", "sharpness=0.1"]}
 STEPS = (1e-2, 1e-4, 1e-6)
-USEFUL, CONVERGED = 0.1, 1e-3  # departures (relative to the running magnitude) that end each horizon
+USEFUL = 0.1  # the departure (relative to the running magnitude) that ends the useful horizon; AGREEMENT the converged
 FLOOR = 0.01  # the running magnitude's floor, a share of the run's largest |dJ/dθ|
 
 
@@ -74,11 +74,11 @@ def measure(scene: str, mechanics: str, args, device) -> dict:
     t = result["times"] / (result["period"] or result["period_kinetic"])  # the measured period, else the kinetics'
     series = result["derivatives"][args.wrt]
     smallest, second, largest = series[-1], series[-2] if len(series) > 1 else series[-1], series[0]
-    useful, converged = horizon(t, smallest, largest, USEFUL), horizon(t, smallest, second, CONVERGED)
+    useful, converged = horizon(t, smallest, largest, USEFUL), horizon(t, smallest, second, AGREEMENT)
     stride = max(1, len(t) // 400)  # the chart's and the JSON's samples
     label = " ".join([mechanics, *args.set, *(["insensitive"] if args.sensitive == "false" else [])])
-    return {"scene": scene, "mechanics": mechanics, "label": label, "wrt": args.wrt, "value": getattr(p, args.wrt), "period": result["period"], "distance_R": result["objective"],
-            "gradient_end": result["gradient"][args.wrt], "steps": list(args.steps), "useful_horizon_T": useful,
+    return {"scene": scene, "mechanics": mechanics, "label": label, "wrt": args.wrt, "value": getattr(p, args.wrt),
+            "period": result["period"], "distance_R": result["objective"], "gradient_end": result["gradient"][args.wrt], "steps": list(args.steps), "useful_horizon_T": useful,
             "converged_horizon_T": converged, "growth_per_period": growth_per_period(t, smallest, converged),
             "t_over_T": t[::stride].tolist(), "derivatives": [s[::stride].tolist() for s in series],
             "distance": result["distance"][::stride].tolist()}  # fmt: skip
@@ -116,7 +116,8 @@ def main(argv=None) -> int:
     parser.add_argument("--mechanics", nargs="+", choices=tuple(MECHANICS), default=list(MECHANICS))
     parser.add_argument("--periods", type=float, default=6.0)
     parser.add_argument("--wrt", choices=PER_WORLD, default="AC", help="the parameter θ (a per-world one)")
-    parser.add_argument("--steps", nargs="+", type=float, default=list(STEPS), help="relative steps of θ, largest first")
+    parser.add_argument("--steps", nargs="+", type=float, default=list(STEPS),
+                        help="relative steps of θ, largest first")  # fmt: skip
     parser.add_argument("--sensitive", choices=("true", "false"), default="true")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed for every run")
     parser.add_argument("--quick", action="store_true", help="the scenes' quick meshes (a CPU smoke run)")

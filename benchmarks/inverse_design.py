@@ -25,9 +25,10 @@ if __package__ in (None, ""):
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
+from wavewarp.driver import simulate  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
-from wavewarp.walker_gradients import forward_distance, walker_gradient  # noqa: E402
+from wavewarp.walker_gradients import walker_gradient  # noqa: E402
 
 
 def log_step(theta: dict, gradient: dict, rate: float) -> dict:
@@ -58,12 +59,10 @@ def ascend(objective_and_gradient, theta: dict, *, iterations: int, rate: float,
 
 def verify(module, p, device) -> float:
     """The walk of a plain forward run of the scene at `p` (its own steps): J at its end, in R."""
-    run = module.build(p, device=device, report=lambda message: None)
-    run.record(run.time, run.frame())
-    for _ in range(run.frames):
-        run.advance_frame()
-        run.record(run.time, run.frame())
-    return float(forward_distance(run.trace, run.forward, run.radius)[-1])
+    outcome = simulate(module.build(p, device=device, report=lambda message: None), [])
+    if outcome.failure is not None:
+        raise RuntimeError(f"the verifying forward run stopped: {outcome.failure}")
+    return float(outcome.measurements["distance_R"])
 
 
 def chart(result: dict, path: str) -> None:
@@ -119,7 +118,8 @@ def main(argv=None) -> int:
     history = ascend(objective_and_gradient, theta, iterations=args.iterations, rate=args.rate)
     best = max((row for row in history if row["accepted"]), key=lambda row: row["J"])
     verified = verify(module, replace(p, **best["theta"]), device)
-    print(f"best J = {best['J']:+.6g} R (from {history[0]['J']:+.6g}) at {best['theta']}; plain forward run: {verified:+.6g} R")
+    print(f"best J = {best['J']:+.6g} R (from {history[0]['J']:+.6g}) at {best['theta']}; "
+          f"plain forward run: {verified:+.6g} R")
     result = {"benchmark": "inverse_design", "date": date.today().isoformat(), **describe_device(device),
               "scene": args.scene, "quick": args.quick, "periods": args.periods, "wrt": args.wrt, "step": args.step,
               "history": history, "best": best, "verified_J": verified}  # fmt: skip

@@ -1,8 +1,8 @@
 """Batched walkers (docs/theory/batches.md): N walker worlds of one mesh topology stepped together.
 
 The worlds' meshes form one `Mesh.union`; one Model holds them with per-world couplings and moduli
-(AC, AI, h, Y, μV) and rest shapes (noise, elongation), one State holds every world's x, v, c, w, and every solver steps all worlds in
-the same launches and the same captured graph. Worlds never interact: every reduction (volume,
+(AC, AI, h, Y, μV) and rest shapes (noise, elongation), one State holds every world's x, v, c, w,
+and every solver steps all worlds in the same launches and the same captured graph. Worlds never interact: every reduction (volume,
 rigid-body sums, the trace) is per world, so in deterministic float64 each world equals its own
 single run bit for bit (tests/test_batch.py). A world that blows up is stopped at the start of the
 chunk it failed in and reported; the others go on.

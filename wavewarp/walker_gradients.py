@@ -14,17 +14,19 @@ batch's steps.
 from __future__ import annotations
 
 import math
-from dataclasses import fields, replace
+from dataclasses import replace
 
 import numpy as np
 
 from .measurements import locomotion
+from .parameters import SceneError, fields, parse
 
 PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "elongation")  # the batch's per-world shell and shape parameters
 SHARED = ("friction", "sharpness", "stiffness", "contact_damping", "drag")  # one ground and drag per batch
 PARAMETERS = PER_WORLD + SHARED
 OBJECTIVES = ("distance", "speed")  # R along the wave at the end; R per measured period between the first and last pulse
 STEPS = (1e-4, 1e-5)  # relative steps of the central differences (absolute where θ = 0)
+AGREEMENT = 1e-3  # two steps' relative disagreement beyond which a derivative is not resolved
 
 
 class WalkerGradientError(ValueError):
@@ -45,20 +47,21 @@ def check_walker_differentiable(wrt, objective: str = "distance", steps=STEPS) -
 
 def check_walker_values(p, wrt, steps=STEPS) -> None:
     """Raise WalkerGradientError, naming the fix, where a parameter's value leaves no central difference: Coulomb's
-    k_f = inf, an automatic 0, or θ - δ outside the parameter's valid range."""
-    meta = {f.name: f.metadata for f in fields(p)}
+    k_f = inf, an automatic 0, or θ - δ outside the parameter's valid range (the scene parameters' own check)."""
+    known = fields(p)
     for name in wrt:
-        theta, check = float(getattr(p, name)), meta[name]
+        theta = float(getattr(p, name))
         if name == "sharpness" and math.isinf(theta):
             raise WalkerGradientError("sharpness = inf is Coulomb's law, which has no derivative in k_f: --set "
                                       "sharpness=1e4 walks as Coulomb does (docs/studies/2026-11-27-walker-regime-scans.md)")  # fmt: skip
-        if check.get("auto") and theta == 0:
+        if known[name].metadata.get("auto") and theta == 0:
             raise WalkerGradientError(f"{name} = 0 means automatic: give it a value (--set {name}=...)")
         lowest = theta - max(steps) * (abs(theta) or 1.0)
-        minimum = 0.0 if check.get("positive") else check.get("minimum")
-        if minimum is not None and (lowest < minimum or (check.get("positive") and lowest <= 0)):
-            raise WalkerGradientError(f"{name} = {theta:g}: the central difference's θ - δ = {lowest:g} leaves its valid "
-                                      f"range (>= {minimum:g}); differentiate where {name} > {minimum:g}")  # fmt: skip
+        try:
+            parse(known[name], repr(lowest))
+        except SceneError as error:
+            raise WalkerGradientError(f"{name} = {theta:g}: the central difference's θ - δ leaves its valid range "
+                                      f"({error}); differentiate further inside it") from None  # fmt: skip
 
 
 def perturbed_worlds(p, wrt, steps) -> list:
