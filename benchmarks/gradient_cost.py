@@ -1,8 +1,10 @@
 """What a walker gradient costs (issue 31): the wall time of `walker_gradient` for P = 1, 2, ... parameters
-(one step: 1 + 2P worlds in one float64 batch) against the forward run it differentiates (one world,
-the same batch code, float64), and on a GPU the device memory each holds.
+(one step: 1 + 2P worlds in one float64 batch) and for the rest shape's control points (`--shape-points`: n points,
+P = 3n coordinates) against the forward run it differentiates (one world, the same batch code, float64), and on a
+GPU the device memory each holds.
 
     wavewarp bench gradient_cost --device cuda --scene sphere-walker --periods 1 --out benchmarks/results
+    wavewarp bench gradient_cost --device cuda --scene prism-walker --quick --wrt --shape-points 1,4,16,all
 
 Central differences keep no history: their memory is that of 1 + 2P worlds whatever the horizon (no
 tape, no checkpoints). Writes gradient_cost.json and .png (time ratio against P).
@@ -11,20 +13,23 @@ tape, no checkpoints). Writes gradient_cost.json and .png (time ratio against P)
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 import time
 from datetime import date
+from types import SimpleNamespace
 
 if __package__ in (None, ""):
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+import numpy as np  # noqa: E402
 import warp as wp  # noqa: E402
 
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
-from wavewarp.walker_gradients import PER_WORLD, walker_gradient  # noqa: E402
+from wavewarp.walker_gradients import PER_WORLD, control_points, walker_gradient  # noqa: E402
 
 
 def device_memory(device):
@@ -36,6 +41,7 @@ def timed(make, device) -> tuple:
     """(seconds, device bytes held once the first batch is built) of `make(on_built)`, which calls `on_built()`
     after building each batch (the first call counts)."""
     held = {}
+    gc.collect()  # the last run's arrays released before the pool is read
     wp.synchronize_device(device)
     before = device_memory(device)
     start = time.perf_counter()
@@ -54,27 +60,35 @@ def measure(args, device) -> dict:
         on_built()
         batch.run()
 
-    def gradient(wrt):
+    def gradient(wrt, points=()):
         def make(on_built):
             def build(ps, **options):
                 batch = module.build_batch(ps, **options)
                 on_built()  # the first call: the main batch
                 return batch
 
-            walker_gradient(build, p, wrt, steps=(args.step,), device=device, report=lambda message: None)
+            scene = SimpleNamespace(recipe=module.recipe, build_batch=build)
+            walker_gradient(scene, p, wrt, points=points, steps=(args.step,), device=device, report=lambda message: None)
 
         return make
 
     forward(lambda: None)  # compiles every kernel before anything is timed
     seconds, held = timed(forward, device)
     rows = [{"parameters": 0, "worlds": 1, "seconds": seconds, "bytes": held, "ratio": 1.0}]
-    for count in range(1, len(args.wrt) + 1):
-        seconds, held = timed(gradient(args.wrt[:count]), device)
-        rows.append({"parameters": count, "worlds": 1 + 2 * count, "seconds": seconds, "bytes": held,
+    vertices = len(module.recipe(p, device=device, report=lambda message: None)[0].vertices)
+    runs = [("parameters", args.wrt[:count], ()) for count in range(1, len(args.wrt) + 1)]
+    for count in args.shape_points:
+        n = vertices if count == "all" else min(int(count), vertices)
+        runs.append(("shape", [], control_points(np.linspace(0, vertices - 1, n).round().astype(int), vertices)))
+    for kind, wrt, points in runs:
+        seconds, held = timed(gradient(wrt, points), device)
+        count = len(wrt) + 3 * len(points)
+        rows.append({"kind": kind, "parameters": count, "worlds": 1 + 2 * count, "seconds": seconds, "bytes": held,
                      "ratio": seconds / rows[0]["seconds"]})  # fmt: skip
-        print(f"P = {count}: {1 + 2 * count} worlds, {seconds:.2f} s, {rows[-1]['ratio']:.2f} × the forward run"
-              + (f", {held / 2**20:.1f} MiB" if held is not None else ""))  # fmt: skip
-    return {"scene": args.scene, "periods": args.periods, "step": args.step, "wrt": args.wrt, "rows": rows}
+        print(f"{kind} P = {count}: {1 + 2 * count} worlds, {seconds:.2f} s, {rows[-1]['ratio']:.2f} × the forward "
+              "run" + (f", {held / 2**20:.1f} MiB" if held is not None else ""))  # fmt: skip
+    return {"scene": args.scene, "periods": args.periods, "step": args.step, "wrt": args.wrt,
+            "control_points": vertices, "rows": rows}  # fmt: skip
 
 
 def chart(result: dict, path: str) -> None:
@@ -82,9 +96,14 @@ def chart(result: dict, path: str) -> None:
 
     rows = result["rows"]
     fig, ax = plt.subplots(figsize=(5.5, 4))
-    ax.plot([r["parameters"] for r in rows], [r["ratio"] for r in rows], "o-", color="k", label="measured")
-    ax.plot([r["parameters"] for r in rows], [r["worlds"] for r in rows], ":", color="grey",
+    for kind, marker in (("parameters", "o-"), ("shape", "s-")):
+        chosen = [r for r in rows if r.get("kind") == kind]
+        if chosen:
+            ax.plot([r["parameters"] for r in chosen], [r["ratio"] for r in chosen], marker, label=f"measured: {kind}")
+    ax.plot([r["parameters"] for r in rows[1:]], [r["worlds"] for r in rows[1:]], ":", color="grey",
             label="worlds (one after another)")  # fmt: skip
+    ax.set_xscale("log")
+    ax.set_yscale("log")
     ax.axhline(5.0, color="tab:red", ls="--", lw=0.8, label="goal: 5 × the forward run")
     ax.set_xlabel("parameters P (1 + 2P worlds)")
     ax.set_ylabel("gradient time / forward time")
@@ -99,7 +118,10 @@ def main(argv=None) -> int:
     parser.add_argument("--device", default=None)
     parser.add_argument("--scene", default="sphere-walker")
     parser.add_argument("--periods", type=float, default=1.0)
-    parser.add_argument("--wrt", nargs="+", choices=PER_WORLD, default=list(PER_WORLD))
+    parser.add_argument("--wrt", nargs="*", choices=PER_WORLD, default=list(PER_WORLD))
+    parser.add_argument("--shape-points", type=lambda text: [n if n == "all" else int(n) for n in text.split(",") if n],
+                        default=[], metavar="N1,N2,...", help="numbers of control points (spread over the mesh, or "
+                        "all) whose coordinates the shape gradient takes: one run each")  # fmt: skip
     parser.add_argument("--step", type=float, default=1e-4, help="relative step of the central differences")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed scene parameters")
     parser.add_argument("--quick", action="store_true", help="the scene's quick mesh (a CPU smoke run)")

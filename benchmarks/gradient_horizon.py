@@ -70,7 +70,7 @@ def measure(scene: str, mechanics: str, args, device) -> dict:
     p = resolve(module.Parameters, getattr(module, "QUICK", {}) if args.quick else None,
                 [*MECHANICS[mechanics], f"periods={args.periods}", f"sensitive={args.sensitive}", *args.set])  # fmt: skip
     p = replace(p, frames=max(1, round(args.periods)))
-    result = walker_gradient(module.build_batch, p, [args.wrt], steps=args.steps, device=device, report=lambda m: None)
+    result = walker_gradient(module, p, [args.wrt], steps=args.steps, device=device, report=lambda m: None)
     t = result["times"] / (result["period"] or result["period_kinetic"])  # the measured period, else the kinetics'
     series = result["derivatives"][args.wrt]
     smallest, second, largest = series[-1], series[-2] if len(series) > 1 else series[-1], series[0]

@@ -15,9 +15,12 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
     return sphere_walker_run(NAME, p, seed=seed, mesh=mesh, device=device, bilayer=True, report=report)
 
 
-def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None):
+recipe = partial(sphere_walker_recipe, bilayer=True)  # the scene's noiseless mesh and options
+
+
+def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None, rest_shapes=None):
     """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world;
-    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds)."""
-    recipe = partial(sphere_walker_recipe, bilayer=True)
+    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds);
+    `rest_shapes(mesh)` one displacement of the control points per world (`walker_batch`'s)."""
     return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report,
-                        mechanics_dt=mechanics_dt)
+                        mechanics_dt=mechanics_dt, rest_shapes=rest_shapes)

@@ -4,7 +4,6 @@ from dataclasses import dataclass
 
 from wavewarp.mesh import cube
 from wavewarp.parameters import param
-from functools import partial
 
 from wavewarp.batch import walker_batch
 from wavewarp.walker import WalkerParameters, box_walker_recipe, box_walker_run
@@ -38,10 +37,14 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
                           report=report)  # fmt: skip
 
 
-def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None):
+def recipe(p, *, device=None, report=print):
+    """The scene's noiseless mesh (its control points: shape gradients) and `WalkerBatch` options."""
+    return box_walker_recipe(p, cube, ORIGINS, radius=p.edge / L_OVER_R, device=device, report=report)
+
+
+def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None, rest_shapes=None):
     """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world;
-    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds)."""
-    p = ps[0]
-    recipe = partial(box_walker_recipe, make_box=cube, origins=ORIGINS, radius=p.edge / L_OVER_R)
+    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds);
+    `rest_shapes(mesh)` one displacement of the control points per world (`walker_batch`'s)."""
     return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report,
-                        mechanics_dt=mechanics_dt)
+                        mechanics_dt=mechanics_dt, rest_shapes=rest_shapes)

@@ -5,7 +5,6 @@ from dataclasses import dataclass
 
 from wavewarp.mesh import prism
 from wavewarp.parameters import param
-from functools import partial
 
 from wavewarp.batch import walker_batch
 from wavewarp.walker import WalkerParameters, box_walker_recipe, box_walker_run
@@ -39,10 +38,14 @@ def build(p, *, mesh=None, device=None, seed=0, report=print):
                           device=device, report=report)  # fmt: skip
 
 
-def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None):
+def recipe(p, *, device=None, report=print):
+    """The scene's noiseless mesh (its control points: shape gradients) and `WalkerBatch` options."""
+    return box_walker_recipe(p, prism, ORIGINS, radius=p.edge / L_OVER_R, axis_to_x=True, device=device, report=report)
+
+
+def build_batch(ps, *, seeds, device=None, report=print, mechanics_dt=None, rest_shapes=None):
     """Worlds of this scene stepped together (wavewarp/batch.py): one parameter set and seed per world;
-    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds)."""
-    p = ps[0]
-    recipe = partial(box_walker_recipe, make_box=prism, origins=ORIGINS, radius=p.edge / L_OVER_R, axis_to_x=True)
+    `mechanics_dt` the settling steps (`WalkerRun`'s; default: the strictest world's bounds);
+    `rest_shapes(mesh)` one displacement of the control points per world (`walker_batch`'s)."""
     return walker_batch(NAME, recipe, ps, seeds=seeds, device=device, report=report,
-                        mechanics_dt=mechanics_dt)
+                        mechanics_dt=mechanics_dt, rest_shapes=rest_shapes)

@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from wavewarp.batch import displaced
 from wavewarp.benchmarks.gradient_horizon import growth_per_period, horizon, running_magnitude
 from wavewarp.benchmarks.inverse_design import ascend, log_step
 from wavewarp.cli import main
@@ -14,10 +15,13 @@ from wavewarp.driver import simulate
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.walker import WalkerRun, place_walker, sphere_walker_recipe
 from wavewarp.walker_gradients import (WalkerGradientError, check_walker_differentiable, check_walker_values,
-                                       forward_distance, objective_value, perturbed_worlds, walker_gradient)  # fmt: skip
+                                       control_points, forward_distance, objective_value, perturbed_worlds,
+                                       walker_gradient)  # fmt: skip
 
 # the quick sphere walker for a third of a period, in float64 (the gradient's dtype)
 SHORT = ["periods=0.3", "frames=1", "dtype=float64"]
+# shape gradients: the level-1 sphere (42 control points) settled briefly, a tenth of a period
+COARSE = ["level=1", "periods=0.1", "settle=2", "frames=1"]
 
 
 def quick_sphere(*overrides):
@@ -96,7 +100,7 @@ def test_the_batched_differences_equal_those_of_whole_single_runs_and_converge(n
     """The ±δ worlds against two separate single-world runs of the scene (each its own model and wave)
     settled with the main batch's mechanics steps, and the derivative's convergence between the steps."""
     module, p = quick_sphere()
-    result = walker_gradient(module.build_batch, p, [name], steps=steps, device="cpu", report=lambda m: None)
+    result = walker_gradient(module, p, [name], steps=steps, device="cpu", report=lambda m: None)
     assert result["agreement"][name] < 1e-5  # measured 5.6e-9 (AC), 1.4e-7 (friction)
     theta, delta = getattr(p, name), result["deltas"][name][0]
     ends = []
@@ -133,6 +137,9 @@ def test_the_design_ascent_reaches_the_maximum_of_a_known_objective():
     best = max(history, key=lambda row: row["J"])["theta"]
     assert best["a"] == pytest.approx(np.e, rel=1e-2) and best["b"] == pytest.approx(np.exp(-0.5), rel=1e-2)
     assert log_step({"a": 2.0, "b": 1.0}, {"a": 1.0, "b": -4.0}, 0.5) == pytest.approx({"a": 2.0 * np.exp(0.25), "b": np.exp(-0.5)})
+    # a coordinate (any sign) steps additively by rate × L at most: s = (2 × 1, 10 × -0.4) -> Δx = 0.5 × 10 × (-4/4)
+    assert log_step({"a": 2.0, "x": -1.0}, {"a": 1.0, "x": -0.4}, 0.5, {"x": 10.0}) == pytest.approx(
+        {"a": 2.0 * np.exp(0.25), "x": -6.0})
 
 
 def test_the_elongation_stretches_the_rest_shape_along_the_wave_and_keeps_the_origin_vertex():
@@ -158,9 +165,10 @@ def test_bench_gradient_horizon_quick_writes_its_horizons_and_chart(tmp_path):
 @pytest.mark.slow
 def test_bench_inverse_design_quick_keeps_the_best_step_and_verifies_it(tmp_path):
     assert main(["bench", "inverse_design", "--device", "cpu", "--quick", "--scene", "sphere-walker", "--periods", "0.3",
-                 "--iterations", "2", "--wrt", "AC", "--out", str(tmp_path)]) == 0  # fmt: skip
+                 "--iterations", "2", "--wrt", "AC", "--points", "3", "--out", str(tmp_path)]) == 0  # fmt: skip
     result = json.loads((tmp_path / "inverse_design.json").read_text())
     assert [row["iteration"] for row in result["history"]] == [0, 1]
+    assert set(result["history"][0]["gradient"]) == {"AC", "X3x", "X3y", "X3z"} and result["points"] == [3]
     assert result["best"]["J"] == max(row["J"] for row in result["history"] if row["accepted"])
     # the batch's unperturbed world and the plain run differ only in the settling steps each chose
     assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-3)
@@ -169,9 +177,9 @@ def test_bench_inverse_design_quick_keeps_the_best_step_and_verifies_it(tmp_path
 @pytest.mark.slow
 def test_bench_gradient_cost_quick_times_the_gradient_against_its_forward_run(tmp_path):
     assert main(["bench", "gradient_cost", "--device", "cpu", "--quick", "--periods", "0.2", "--wrt", "AC",
-                 "--out", str(tmp_path)]) == 0  # fmt: skip
+                 "--shape-points", "1", "--out", str(tmp_path)]) == 0  # fmt: skip
     rows = json.loads((tmp_path / "gradient_cost.json").read_text())["rows"]
-    assert [(r["parameters"], r["worlds"]) for r in rows] == [(0, 1), (1, 3)]
+    assert [(r["parameters"], r["worlds"]) for r in rows] == [(0, 1), (1, 3), (3, 7)]
     assert rows[0]["ratio"] == 1.0 and rows[1]["ratio"] == pytest.approx(rows[1]["seconds"] / rows[0]["seconds"])
     assert rows[1]["bytes"] is None  # device memory is a GPU's
 
@@ -189,3 +197,87 @@ def test_the_speed_objective_is_the_walk_per_measured_period():
     short = t <= 30.0  # one crossing, at t = 40/12
     with pytest.raises(WalkerGradientError, match="periods=2"):
         objective_value("speed", trace[short], distance[short], [1.0, 0.0, 0.0], 2.0, 40.0)
+
+
+def test_rest_shapes_displace_each_worlds_control_points_and_are_checked():
+    _, p = quick_sphere()
+    mesh, _ = sphere_walker_recipe(p, device="cpu", report=lambda m: None)
+    moved = np.zeros_like(mesh.vertices)
+    moved[5] = [0.5, -0.25, 1.0]
+    plain, shifted = displaced(mesh, [np.zeros_like(moved), moved], 2)
+    assert np.array_equal(plain.vertices, mesh.vertices) and np.array_equal(shifted.triangles, mesh.triangles)
+    assert shifted.vertices - mesh.vertices == pytest.approx(moved, abs=1e-15)
+    with pytest.raises(ValueError, match="one .* displacement per world"):
+        displaced(mesh, [moved], 2)
+    with pytest.raises(ValueError, match=r"\(162, 3\)"):
+        displaced(mesh, [moved[:-1]], 1)
+
+
+def test_control_points_are_checked_against_the_scenes_mesh():
+    assert control_points("all", 4) == [0, 1, 2, 3] and control_points(np.array([3, 1]), 4) == [3, 1]
+    for wrong in ([4], [-1], [1, 1]):
+        with pytest.raises(WalkerGradientError, match="between 0 and 3"):
+            control_points(wrong, 4)
+
+
+def test_the_shape_gradient_keeps_the_sphere_walkers_mirror_symmetry():
+    """The wave starts on the equator at -x and the icosphere is mirror-symmetric in y: the control point mirrored
+    in y pulls the walk the same way along x and z, and opposite along y. Known before the run."""
+    module = load_scene("sphere-walker")
+    p = resolve(module.Parameters, module.QUICK, COARSE)
+    rest = module.recipe(p, device="cpu", report=lambda m: None)[0].vertices
+    point = int(np.argmax(rest[:, 1] - 0.1 * rest[:, 0]))  # off every mirror plane but y's partner
+    mirror = int(np.argmin(np.linalg.norm(rest - rest[point] * [1.0, -1.0, 1.0], axis=1)))
+    assert mirror != point and np.allclose(rest[mirror], rest[point] * [1.0, -1.0, 1.0], atol=1e-12)
+    result = walker_gradient(module, p, points=[point, mirror], steps=(1e-4,), device="cpu", report=lambda m: None)
+    g = result["shape_gradient"]
+    assert g.shape == (2, 3) and np.linalg.norm(g[0]) > 1e-3 * abs(result["objective"]) / p.radius  # it matters
+    assert g[1] == pytest.approx(g[0] * [1.0, -1.0, 1.0], rel=1e-6, abs=1e-9 * np.linalg.norm(g[0]))
+    assert result["shape_derivatives"].shape == (1, 2, 3, len(result["times"]))
+    rms = np.sqrt(np.mean(np.sum((rest - rest.mean(axis=0)) ** 2, axis=1)))  # the control points' (outside the sphere)
+    assert result["shape_deltas"] == pytest.approx([1e-4 * rms], rel=1e-12) and rms > p.radius
+
+
+def test_a_walker_displaced_rigidly_walks_as_before():
+    """`rest_shape` moves every world's control points; a rigid horizontal shift (and a vertical one, which the
+    walker's placement on the ground undoes) leaves the walk and its shape gradient as they were."""
+    module = load_scene("sphere-walker")
+    p = resolve(module.Parameters, module.QUICK, COARSE)
+    rest = module.recipe(p, device="cpu", report=lambda m: None)[0].vertices
+    shift = np.tile([3.0, -2.0, 1.5], (len(rest), 1))
+    plain, shifted = (walker_gradient(module, p, points=[5], rest_shape=shape, steps=(1e-4,), device="cpu",
+                                      report=lambda m: None) for shape in (None, shift))  # fmt: skip
+    assert shifted["rest_vertices"] == pytest.approx(rest + shift, abs=1e-12)
+    assert shifted["objective"] == pytest.approx(plain["objective"], rel=1e-8)
+    assert shifted["shape_gradient"] == pytest.approx(plain["shape_gradient"], rel=1e-5, abs=1e-5 * np.abs(plain["shape_gradient"]).max())
+    with pytest.raises(WalkerGradientError, match="rest_shape"):
+        walker_gradient(module, p, points=[5], rest_shape=shift[:-1], device="cpu", report=lambda m: None)
+
+
+@pytest.mark.slow
+def test_the_shape_gradient_of_every_control_point_knows_translations_and_the_elongation():
+    """Two answers known in advance: translating the rest shape rigidly does not change the walk (the ground is
+    level and the walker is set down on it), so the shape gradient sums to zero along each axis; stretching it along
+    x about x = 0 moves control point i by x_i per unit of elongation, so dJ/d elongation = Σ_i x_i dJ/dX_i."""
+    module = load_scene("sphere-walker")
+    p = resolve(module.Parameters, module.QUICK, COARSE)
+    result = walker_gradient(module, p, ["elongation"], points="all", steps=(1e-4,), device="cpu",
+                             report=lambda m: None)  # fmt: skip
+    g, x = result["shape_gradient"], result["rest_vertices"][:, 0]
+    assert g.shape == (42, 3)
+    scale = np.linalg.norm(g, axis=0)
+    assert np.all(np.abs(g.sum(axis=0)) < 1e-4 * scale)  # measured 7e-7, 4e-9, 9e-8
+    elongation = result["gradient"]["elongation"]
+    assert abs(elongation) > 1e-2 * abs(result["objective"])
+    assert x @ g[:, 0] == pytest.approx(elongation, rel=1e-5)  # measured 5e-7
+
+
+@pytest.mark.slow
+def test_the_cli_prints_a_shape_gradient_and_refuses_one_for_a_quasi_static_scene(capsys):
+    assert main(["grad", "sphere-walker", "--quick", "--points", "3,7", "--device", "cpu", "--json",
+                 *[f"--set={s}" for s in COARSE]]) == 0  # fmt: skip
+    out = json.loads(capsys.readouterr().out)
+    assert out["gradient"] == {} and out["shape_gradient"]["points"] == [3, 7]
+    assert np.asarray(out["shape_gradient"]["gradient"]).shape == (2, 3)
+    assert main(["grad", "starfish", "--quick", "--points", "3", "--device", "cpu"]) != 0
+    assert "drop --points" in capsys.readouterr().err

@@ -231,14 +231,27 @@ class WalkerBatch(WorldsRun):
                              self.period_kinetic), **self.rotation.measurements(placed.forward, w)}  # fmt: skip
 
 
-def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print, mechanics_dt=None) -> WalkerBatch:
+def walker_batch(name: str, recipe, ps: list, *, seeds, device=None, report=print, mechanics_dt=None,
+                 rest_shapes=None) -> WalkerBatch:  # fmt: skip
     """A scene's walkers as one batch: `recipe(p, device=, report=)` gives the scene's noiseless mesh and
     options (`sphere_walker_recipe`, `box_walker_recipe`); world w is ps[w] with its rest shape
-    perturbed by ps[w].noise × radius, seeded by seeds[w]; `mechanics_dt` as `WalkerBatch`'s."""
+    perturbed by ps[w].noise × radius, seeded by seeds[w]; `mechanics_dt` as `WalkerBatch`'s;
+    `rest_shapes(mesh)`, where given, one (V, 3) displacement of the scene's control points per world,
+    added before the noise and the elongation."""
     ps, seeds = list(ps), [int(s) for s in seeds]
     if len(seeds) != len(ps):
         raise ValueError(f"a batch needs one seed per world: {len(seeds)} seeds for {len(ps)} parameter sets")
     check_batch(ps)
     mesh, options = recipe(ps[0], device=device, report=report)
-    meshes = [imperfect(mesh, p.noise * options["radius"], seed) for p, seed in zip(ps, seeds)]
+    shapes = [mesh] * len(ps) if rest_shapes is None else displaced(mesh, rest_shapes(mesh), len(ps))
+    meshes = [imperfect(shape, p.noise * options["radius"], seed) for shape, p, seed in zip(shapes, ps, seeds)]
     return WalkerBatch(name, meshes, ps, device=device, report=report, mechanics_dt=mechanics_dt, **options)
+
+
+def displaced(mesh: Mesh, displacements, worlds: int) -> list:
+    """One mesh per world: `mesh` with each world's (V, 3) displacement of its control points."""
+    displacements = [np.asarray(d, dtype=np.float64) for d in displacements]
+    if len(displacements) != worlds or any(d.shape != mesh.vertices.shape for d in displacements):
+        raise ValueError(f"rest_shapes must give one {mesh.vertices.shape} displacement per world ({worlds} worlds): "
+                         f"got {[d.shape for d in displacements]}")  # fmt: skip
+    return [Mesh(mesh.vertices + d, mesh.triangles) for d in displacements]

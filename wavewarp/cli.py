@@ -20,7 +20,7 @@ from .version import __version__
 from .driver import simulate
 from .device import resolve_device, set_deterministic
 from .geometry import limit_positions
-from .gradients import OBJECTIVES, PARAMETERS, check_differentiable, scene_gradient
+from .gradients import OBJECTIVES, PARAMETERS, GradientError, check_differentiable, scene_gradient
 from .walker import WalkerParameters
 from .walker_gradients import OBJECTIVES as WALKER_OBJECTIVES, PARAMETERS as WALKER_PARAMETERS, STEPS as WALKER_STEPS
 from .walker_gradients import AGREEMENT, walker_gradient
@@ -234,15 +234,24 @@ def _gradient(args) -> int:
 
     if issubclass(module.Parameters, WalkerParameters):
         objective = args.objective or WALKER_OBJECTIVES[0]
-        result = walker_gradient(module.build_batch, p, args.wrt, objective=objective, steps=args.steps, seed=args.seed,
-                                 device=args.device, report=report)  # fmt: skip
+        result = walker_gradient(module, p, args.wrt, points=args.points, objective=objective, steps=args.steps,
+                                 seed=args.seed, device=args.device, report=report)  # fmt: skip
         extra = {"agreement": result["agreement"], "steps": result["steps"], "period": result["period"]}
+        if args.points:
+            extra["shape_gradient"] = {"points": result["points"], "gradient": result["shape_gradient"].tolist(),
+                                       "agreement": result["shape_agreement"]}  # fmt: skip
+            if result["shape_agreement"] > AGREEMENT:
+                report(f"d{objective}/dX: the steps {result['steps']} disagree by {result['shape_agreement']:.2g} "
+                       "(docs/theory/gradients.md): a shorter run (--set periods=...) or smaller --steps")  # fmt: skip
         for name, agreement in result["agreement"].items():
             if agreement > AGREEMENT:
                 report(f"d{objective}/d{name}: the steps {result['steps']} disagree by {agreement:.2g} — past the "
                        "gradient's horizon or at a kink of the walk (docs/theory/gradients.md): a shorter run "
                        "(--set periods=...) or smaller --steps")  # fmt: skip
     else:
+        if args.points:
+            raise GradientError("--points: shape gradients are taken through walkers' runs; a quasi-static scene's "
+                                "wave depends on its rest shape, which its adjoint leaves out: drop --points")  # fmt: skip
         objective = args.objective or OBJECTIVES[0]
         run = module.build(p, device=args.device, seed=args.seed, report=report)
         check_differentiable(run, args.wrt, objective)
@@ -258,7 +267,20 @@ def _gradient(args) -> int:
         for name, value in result["gradient"].items():
             agreement = f"  (steps agree to {extra['agreement'][name]:.2g})" if "agreement" in extra else ""
             print(f"d {objective} / d {name} = {value:.10g}{agreement}")
+        if "shape_gradient" in extra:
+            print(f"d {objective} / d X (per unit length; steps agree to {extra['shape_gradient']['agreement']:.2g}):")
+            for point, row in zip(result["points"], result["shape_gradient"]):
+                print(f"  point {point}: {row[0]:+.6g} {row[1]:+.6g} {row[2]:+.6g}")
     return 0
+
+
+def _control_points(text: str):
+    if text == "all":
+        return text
+    try:
+        return [int(point) for point in text.split(",") if point]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: control point indices separated by commas, or all") from None
 
 
 def _relative_steps(text: str) -> tuple:
@@ -319,9 +341,12 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                                "over one batch (docs/theory/gradients.md)")  # fmt: skip
     grad.add_argument("scene", help="a quasi-static scene (oocytes, wave guides, buckling) with --set sensitive=false, "
                       "or a walker")  # fmt: skip
-    grad.add_argument("--wrt", required=True, type=lambda text: [name for name in text.split(",") if name],
+    grad.add_argument("--wrt", default=[], type=lambda text: [name for name in text.split(",") if name],
                       metavar="NAME[,NAME...]", help=f"parameters: quasi-static {', '.join(PARAMETERS)}; walkers "
                       f"{', '.join(WALKER_PARAMETERS)}")  # fmt: skip
+    grad.add_argument("--points", default=(), type=_control_points, metavar="I[,I...]|all",
+                      help="walkers: the rest shape's control points (vertex indices of the scene's mesh, or all) "
+                      "whose coordinates the gradient dJ/dX is taken over, per unit length")  # fmt: skip
     grad.add_argument("--objective", default=None, help=f"quasi-static: {', '.join(OBJECTIVES)} (default); walkers: "
                       f"{', '.join(WALKER_OBJECTIVES)} (default: the centre of mass's displacement along the wave, R)")
     grad.add_argument("--steps", type=_relative_steps, default=WALKER_STEPS, metavar="S1,S2",

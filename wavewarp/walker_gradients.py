@@ -33,12 +33,12 @@ class WalkerGradientError(ValueError):
     """A walker gradient that cannot be taken as asked (the message names the fix)."""
 
 
-def check_walker_differentiable(wrt, objective: str = "distance", steps=STEPS) -> None:
+def check_walker_differentiable(wrt, objective: str = "distance", steps=STEPS, points=()) -> None:
     """Raise WalkerGradientError, naming the fix, where `walker_gradient` cannot be taken."""
     unknown = [name for name in wrt if name not in PARAMETERS]
-    if unknown or not wrt:
+    if unknown or not (len(wrt) or len(points)):
         raise WalkerGradientError(f"--wrt {','.join(unknown) or '(nothing)'}: a walker's differentiable parameters are "
-                                  f"{', '.join(PARAMETERS)}")  # fmt: skip
+                                  f"{', '.join(PARAMETERS)}, and its rest shape's control points (--points)")  # fmt: skip
     if objective not in OBJECTIVES:
         raise WalkerGradientError(f"--objective {objective}: a walker's objectives are {', '.join(OBJECTIVES)}")
     if len(steps) < 1 or any(not 0.0 < step < 0.5 for step in steps):
@@ -83,47 +83,98 @@ def forward_distance(trace: np.ndarray, forward, radius: float) -> np.ndarray:
     return (com - com[0]) @ np.asarray(forward, dtype=np.float64) / radius
 
 
-def walker_gradient(build_batch, p, wrt, *, objective: str = "distance", steps=STEPS, seed: int = 0, device=None,
-                    report=print) -> dict:  # fmt: skip
-    """dJ/dθ of a walker scene (`build_batch(ps, seeds=, device=, report=, mechanics_dt=)`, a scene module's) at
-    parameters `p` for the parameters named in `wrt`, by central differences over one float64 batch (PER_WORLD),
-    and over batches of one world stepped as that batch (SHARED).
+def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: str = "distance", steps=STEPS,
+                    seed: int = 0, device=None, report=print) -> dict:  # fmt: skip
+    """dJ/dθ of a walker `scene` (a scene module: its `build_batch(ps, seeds=, device=, report=, mechanics_dt=,
+    rest_shapes=)` and `recipe(p)`) at parameters `p` for the parameters named in `wrt`, by central differences over
+    one float64 batch (PER_WORLD), and over batches of one world stepped as that batch (SHARED); and dJ/dX of the rest
+    shape's control points `points` (vertex indices of the scene's mesh, or "all"), each coordinate's ± worlds in
+    the main batch (δ = step × the control points' RMS distance from their centroid). `rest_shape`: a (V, 3)
+    displacement of the scene's control points that every world starts from (None: the scene's shape).
 
     Returns {"objective": J (`objective`: the distance at the end, or the speed), "gradient": {name: dJ/dθ with the
     smallest step}, "agreement": {name: |g(δ₁) - g(δ_k)| / |g(δ_k)|, the largest step against the smallest},
     "steps", "deltas": {name: [δ...]}, "times": chemistry times, "distance": the distance D(t) of the
-    unperturbed world, "derivatives": {name: [dD/dθ(t) per step]}, "period": the unperturbed world's measured period (None if fewer than two pulses),
-    "period_kinetic": the FHN kinetics' period, "settle_dt": the mechanics steps the worlds settled and walk with
-    (`WalkerRun`'s `mechanics_dt`)}."""
-    check_walker_differentiable(wrt, objective, steps)
+    unperturbed world, "derivatives": {name: [dD/dθ(t) per step]}, "period": the unperturbed world's measured period
+    (None if fewer than two pulses), "period_kinetic": the FHN kinetics' period, "settle_dt": the mechanics steps the
+    worlds settled and walk with (`WalkerRun`'s `mechanics_dt`)}; with `points`, also "points" (the indices),
+    "rest_vertices" (the control points the gradient is taken at, V × 3), "shape_gradient" (dJ/dX, P × 3 NumPy, per unit length),
+    "shape_agreement" (‖g(δ₁) - g(δ_k)‖ / ‖g(δ_k)‖), "shape_deltas" ([δ...], lengths) and "shape_derivatives"
+    (dD/dX(t): steps × P × 3 × times)."""
+    check_walker_differentiable(wrt, objective, steps, points)
     check_walker_values(p, wrt, steps)
     p = replace(p, dtype="float64")
     worlds = perturbed_worlds(p, [name for name in wrt if name in PER_WORLD], steps)
-    batch = build_batch([q for *_, q in worlds], seeds=[seed] * len(worlds), device=device, report=report)
+    rest = scene.recipe(p, device=device, report=lambda message: None)[0].vertices
+    points = control_points(points, len(rest))
+    base = np.zeros_like(rest) if rest_shape is None else np.asarray(rest_shape, dtype=np.float64)
+    if base.shape != rest.shape:
+        raise WalkerGradientError(f"rest_shape: a {rest.shape} displacement of the scene's control points, not {base.shape}")
+    rest = rest + base
+    displacements = [base] * len(worlds)
+    scale = control_scale(rest)
+    for point in points:
+        for axis in range(3):
+            for step in steps:
+                for sign in (1, -1):
+                    worlds.append((("shape", point, axis), step * scale, sign, p))
+                    displacements.append(base.copy())
+                    displacements[-1][point, axis] += sign * step * scale
+    shaped = points or rest_shape is not None
+    batch = scene.build_batch([q for *_, q in worlds], seeds=[seed] * len(worlds), device=device, report=report,
+                              rest_shapes=(lambda mesh: displacements) if shaped else None)  # fmt: skip
     forward, radius = batch.placed[0].forward, batch.radius
     traces = list(finished(batch, worlds))
     # the shared parameters' worlds: one batch each, stepped as the main batch
     pinned = replace(p, dt=batch.wave.dt)
     for name, delta, sign, q in perturbed_worlds(pinned, [name for name in wrt if name in SHARED], steps)[1:]:
-        alone = build_batch([q], seeds=[seed], device=device, report=report, mechanics_dt=batch.settle_dt)
+        alone = scene.build_batch([q], seeds=[seed], device=device, report=report, mechanics_dt=batch.settle_dt,
+                                  rest_shapes=(lambda mesh: [base]) if shaped else None)  # fmt: skip
         traces += finished(alone, [(name, delta, sign, q)])
         worlds.append((name, delta, sign, q))
     distances = [forward_distance(trace, forward, radius) for trace in traces]
     ends = [objective_value(objective, trace, distance, forward, radius, batch.period_kinetic)
             for trace, distance in zip(traces, distances)]  # fmt: skip
-    derivatives, deltas, differences = {name: [] for name in wrt}, {name: [] for name in wrt}, {name: [] for name in wrt}
+    derivatives, deltas, differences = {}, {}, {}
     for w in range(1, len(worlds), 2):
-        name, delta, _, _ = worlds[w]
-        derivatives[name].append((distances[w] - distances[w + 1]) / (2.0 * delta))
-        differences[name].append((ends[w] - ends[w + 1]) / (2.0 * delta))
-        deltas[name].append(delta)
-    gradient = {name: float(values[-1]) for name, values in differences.items()}
-    agreement = {name: float(abs(values[0] - values[-1]) / max(abs(values[-1]), 1e-300))
-                 for name, values in differences.items()}  # fmt: skip
-    return {"objective": float(ends[0]), "gradient": gradient, "agreement": agreement, "steps": list(steps),
-            "deltas": deltas, "times": batch.traces[0][:, 0], "distance": distances[0], "derivatives": derivatives,
-            "period": batch.measurements(0, batch.time)["period"], "period_kinetic": batch.period_kinetic,
-            "settle_dt": batch.settle_dt}  # fmt: skip
+        key, delta, _, _ = worlds[w]
+        derivatives.setdefault(key, []).append((distances[w] - distances[w + 1]) / (2.0 * delta))
+        differences.setdefault(key, []).append((ends[w] - ends[w + 1]) / (2.0 * delta))
+        deltas.setdefault(key, []).append(delta)
+    result = {"objective": float(ends[0]), "gradient": {name: float(differences[name][-1]) for name in wrt},
+              "agreement": {name: relative_disagreement(differences[name]) for name in wrt}, "steps": list(steps),
+              "deltas": {name: deltas[name] for name in wrt}, "times": batch.traces[0][:, 0], "distance": distances[0],
+              "derivatives": {name: derivatives[name] for name in wrt}, "period": batch.measurements(0, batch.time)["period"],
+              "period_kinetic": batch.period_kinetic, "settle_dt": batch.settle_dt}  # fmt: skip
+    if points:
+        keys = [("shape", point, axis) for point in points for axis in range(3)]
+        by_step = np.array([[differences[key][k] for key in keys] for k in range(len(steps))])  # steps × 3P
+        result.update(points=points, rest_vertices=rest, shape_gradient=by_step[-1].reshape(len(points), 3),
+                      shape_agreement=relative_disagreement(list(by_step)), shape_deltas=[step * scale for step in steps],
+                      shape_derivatives=np.array([[derivatives[key][k] for key in keys] for k in range(len(steps))])
+                      .reshape(len(steps), len(points), 3, -1))  # fmt: skip
+    return result
+
+
+def control_scale(vertices: np.ndarray) -> float:
+    """The control points' RMS distance from their centroid: the length the shape's steps are relative to."""
+    return float(np.sqrt(np.mean(np.sum((vertices - vertices.mean(axis=0)) ** 2, axis=1))))
+
+
+def control_points(points, count: int) -> list:
+    """The control points' indices asked for ("all": every one of `count`), checked."""
+    chosen = list(range(count)) if isinstance(points, str) and points == "all" else [int(i) for i in points]
+    wrong = [i for i in chosen if not 0 <= i < count]
+    if wrong or len(set(chosen)) != len(chosen):
+        raise WalkerGradientError(f"points {wrong or chosen}: give distinct control points between 0 and {count - 1} "
+                                  f"(the scene's mesh at these parameters has {count}), or all")  # fmt: skip
+    return chosen
+
+
+def relative_disagreement(values) -> float:
+    """‖g(δ₁) - g(δ_k)‖ / ‖g(δ_k)‖ of one derivative (or gradient vector) per step."""
+    first, last = np.asarray(values[0], dtype=np.float64), np.asarray(values[-1], dtype=np.float64)
+    return float(np.linalg.norm(first - last) / max(float(np.linalg.norm(last)), 1e-300))
 
 
 def objective_value(objective: str, trace: np.ndarray, distance: np.ndarray, forward, radius: float,
