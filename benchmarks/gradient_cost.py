@@ -29,7 +29,8 @@ import warp as wp  # noqa: E402
 from wavewarp.device import describe_device, resolve_device  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
-from wavewarp.walker_gradients import PER_WORLD, control_points, walker_gradient  # noqa: E402
+from wavewarp.gradients import control_points  # noqa: E402
+from wavewarp.walker_gradients import PER_WORLD, walker_gradient  # noqa: E402
 
 
 def device_memory(device):

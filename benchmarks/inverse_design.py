@@ -32,7 +32,8 @@ from wavewarp.driver import simulate  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.mesh import Mesh  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
-from wavewarp.walker_gradients import control_points, control_scale, walker_gradient  # noqa: E402
+from wavewarp.gradients import control_points, control_scale  # noqa: E402
+from wavewarp.walker_gradients import walker_gradient  # noqa: E402
 
 
 def log_step(theta: dict, gradient: dict, rate: float, lengths=None) -> dict:

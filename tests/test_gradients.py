@@ -9,6 +9,7 @@ import pytest
 from wavewarp.cli import main
 from wavewarp.geometry import limit_positions
 from wavewarp.gradients import GradientError, scene_gradient
+from wavewarp.mesh import Mesh
 from wavewarp.parameters import load_scene, resolve
 
 # a starfish at level 2 whose wave runs on the rest shell, relaxed by Newton steps to a residual strain of 1e-11
@@ -53,6 +54,33 @@ def test_the_gradient_of_the_last_equilibrium_matches_central_differences_of_who
     assert result["gradient"][name] == pytest.approx(expected, rel=1e-5)
 
 
+def test_the_rest_shapes_gradient_matches_central_differences_of_whole_runs():
+    """dJ/dX̄ of two control points (every coordinate) against whole runs from rest meshes with that one
+    coordinate moved by ±1e-4 L: their waves, rest metrics and volumes all move with it."""
+    run = starfish()
+    points = [5, 40]
+    result = scene_gradient(run, [], points=points)
+    module = load_scene("starfish")
+    p = resolve(module.Parameters, None, SETTINGS)
+    rest = run.mesh.vertices
+    delta = 1e-4 * np.sqrt(np.mean(np.sum((rest - rest.mean(axis=0)) ** 2, axis=1)))
+    for k, point in enumerate(points):
+        expected = np.zeros(3)
+        for axis in range(3):
+            heights = []
+            for sign in (1.0, -1.0):
+                moved = rest.copy()
+                moved[point, axis] += sign * delta
+                other = module.build(p, mesh=Mesh(moved, run.mesh.triangles), device="cpu", report=lambda m: None)
+                for _ in range(other.frames):
+                    other.advance_frame()
+                heights.append(height_of(other))
+            expected[axis] = (heights[0] - heights[1]) / (2 * delta)
+        assert np.linalg.norm(expected) > 1e-4  # a gradient that matters (J = 19, L = 27)
+        # measured: 4e-7 to 7e-7 of each large component, 1e-6 of the point's norm at most
+        assert np.abs(result["shape_gradient"][k] - expected).max() < 1e-5 * np.linalg.norm(expected)
+
+
 def test_the_shape_does_not_depend_on_youngs_modulus_alone():
     """Every quasi-static force scales with Y (μV is in units of Y h / R⁴): only ratios matter, so dJ/dY = 0."""
     run = starfish()
@@ -63,15 +91,17 @@ def test_the_shape_does_not_depend_on_youngs_modulus_alone():
 
 
 def test_grad_command_prints_the_objective_and_its_gradient(capsys):
-    code = main(["grad", "starfish", "--device", "cpu", "--wrt", "AC,thickness", "--json",
+    code = main(["grad", "starfish", "--device", "cpu", "--wrt", "AC,thickness", "--points", "5", "--json",
                  *[item for setting in SETTINGS for item in ("--set", setting)]])  # fmt: skip
     captured = capsys.readouterr()
     assert code == 0, captured.err
     result = json.loads(captured.out)
-    direct = scene_gradient(starfish(), ["AC", "thickness"])
+    direct = scene_gradient(starfish(), ["AC", "thickness"], points=[5])
     assert result["objective"] == pytest.approx(direct["objective"], rel=1e-12)
     for name in ("AC", "thickness"):
         assert result["gradient"][name] == pytest.approx(direct["gradient"][name], rel=1e-9)
+    assert result["shape_gradient"]["points"] == [5]
+    assert np.asarray(result["shape_gradient"]["gradient"]) == pytest.approx(direct["shape_gradient"], rel=1e-9)
 
 
 @pytest.mark.parametrize(
@@ -80,6 +110,7 @@ def test_grad_command_prints_the_objective_and_its_gradient(capsys):
         (["starfish", "--quick", "--wrt", "AC"], "sensitive=false"),
         (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "radius"], "differentiable parameters are"),
         (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "AC", "--objective", "speed"], "objectives are"),
+        (["starfish", "--quick", "--set", "sensitive=false", "--points", "5,99999"], "between 0 and 641"),
     ],
 )
 def test_grad_refuses_what_it_cannot_differentiate_and_names_the_fix(argv, message, capsys):

@@ -20,7 +20,7 @@ from .version import __version__
 from .driver import simulate
 from .device import resolve_device, set_deterministic
 from .geometry import limit_positions
-from .gradients import OBJECTIVES, PARAMETERS, GradientError, check_differentiable, scene_gradient
+from .gradients import OBJECTIVES, PARAMETERS, check_differentiable, scene_gradient
 from .walker import WalkerParameters
 from .walker_gradients import OBJECTIVES as WALKER_OBJECTIVES, PARAMETERS as WALKER_PARAMETERS, STEPS as WALKER_STEPS
 from .walker_gradients import AGREEMENT, walker_gradient
@@ -249,16 +249,15 @@ def _gradient(args) -> int:
                        "gradient's horizon or at a kink of the walk (docs/theory/gradients.md): a shorter run "
                        "(--set periods=...) or smaller --steps")  # fmt: skip
     else:
-        if args.points:
-            raise GradientError("--points: shape gradients are taken through walkers' runs; a quasi-static scene's "
-                                "wave depends on its rest shape, which its adjoint leaves out: drop --points")  # fmt: skip
         objective = args.objective or OBJECTIVES[0]
         run = module.build(p, device=args.device, seed=args.seed, report=report)
-        check_differentiable(run, args.wrt, objective)
+        check_differentiable(run, args.wrt, objective, args.points)
         for _ in range(run.frames):
             run.advance_frame()
-        result = scene_gradient(run, args.wrt, objective)
+        result = scene_gradient(run, args.wrt, objective, args.points)
         extra = {"residual": result["residual"]}
+        if args.points:
+            extra["shape_gradient"] = {"points": result["points"], "gradient": result["shape_gradient"].tolist()}
     if args.json:
         print(json.dumps({"scene": module.NAME, "objective_name": objective, "objective": result["objective"],
                           "gradient": result["gradient"], **extra}))  # fmt: skip
@@ -268,7 +267,9 @@ def _gradient(args) -> int:
             agreement = f"  (steps agree to {extra['agreement'][name]:.2g})" if "agreement" in extra else ""
             print(f"d {objective} / d {name} = {value:.10g}{agreement}")
         if "shape_gradient" in extra:
-            print(f"d {objective} / d X (per unit length; steps agree to {extra['shape_gradient']['agreement']:.2g}):")
+            agreement = extra["shape_gradient"].get("agreement")
+            print(f"d {objective} / d X (per unit length" + (f"; steps agree to {agreement:.2g}" if agreement is not None
+                                                              else "") + "):")  # fmt: skip
             for point, row in zip(result["points"], result["shape_gradient"]):
                 print(f"  point {point}: {row[0]:+.6g} {row[1]:+.6g} {row[2]:+.6g}")
     return 0
@@ -345,7 +346,7 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                       metavar="NAME[,NAME...]", help=f"parameters: quasi-static {', '.join(PARAMETERS)}; walkers "
                       f"{', '.join(WALKER_PARAMETERS)}")  # fmt: skip
     grad.add_argument("--points", default=(), type=_control_points, metavar="I[,I...]|all",
-                      help="walkers: the rest shape's control points (vertex indices of the scene's mesh, or all) "
+                      help="the rest shape's control points (vertex indices of the scene's mesh, or all) "
                       "whose coordinates the gradient dJ/dX is taken over, per unit length")  # fmt: skip
     grad.add_argument("--objective", default=None, help=f"quasi-static: {', '.join(OBJECTIVES)} (default); walkers: "
                       f"{', '.join(WALKER_OBJECTIVES)} (default: the centre of mass's displacement along the wave, R)")

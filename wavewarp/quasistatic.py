@@ -168,7 +168,7 @@ class QuasiStaticWaveRun(WaveClock):
     def __init__(self, name: str, mesh: Mesh, p, *, size: float, origin, initial: dict, t_end: float, rule: str = "3",
                  device=None, self_contact: bool = False, adaptive_dt: bool = False, profile=None, measure=None,
                  figures=None, report=print):  # fmt: skip
-        self.name, self.mesh, self.p = name, mesh, p
+        self.name, self.mesh, self.p, self.initial = name, mesh, p, initial
         self.model = quasi_static_model(mesh, [p], size=size, rule=rule, device=device, self_contact=self_contact)
         self.shell = self.model.shell
         self.operator = self.model.operator()

@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .gradients import GradientError, control_points, control_scale
 from .measurements import locomotion
 from .parameters import SceneError, fields, parse
 
@@ -29,7 +30,7 @@ STEPS = (1e-4, 1e-5)  # relative steps of the central differences (absolute wher
 AGREEMENT = 1e-3  # two steps' relative disagreement beyond which a derivative is not resolved
 
 
-class WalkerGradientError(ValueError):
+class WalkerGradientError(GradientError):
     """A walker gradient that cannot be taken as asked (the message names the fix)."""
 
 
@@ -154,21 +155,6 @@ def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: 
                       shape_derivatives=np.array([[derivatives[key][k] for key in keys] for k in range(len(steps))])
                       .reshape(len(steps), len(points), 3, -1))  # fmt: skip
     return result
-
-
-def control_scale(vertices: np.ndarray) -> float:
-    """The control points' RMS distance from their centroid: the length the shape's steps are relative to."""
-    return float(np.sqrt(np.mean(np.sum((vertices - vertices.mean(axis=0)) ** 2, axis=1))))
-
-
-def control_points(points, count: int) -> list:
-    """The control points' indices asked for ("all": every one of `count`), checked."""
-    chosen = list(range(count)) if isinstance(points, str) and points == "all" else [int(i) for i in points]
-    wrong = [i for i in chosen if not 0 <= i < count]
-    if wrong or len(set(chosen)) != len(chosen):
-        raise WalkerGradientError(f"points {wrong or chosen}: give distinct control points between 0 and {count - 1} "
-                                  f"(the scene's mesh at these parameters has {count}), or all")  # fmt: skip
-    return chosen
 
 
 def relative_disagreement(values) -> float:
