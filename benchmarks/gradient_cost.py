@@ -69,7 +69,8 @@ def measure(args, device) -> dict:
                 return batch
 
             scene = SimpleNamespace(recipe=module.recipe, build_batch=build)
-            walker_gradient(scene, p, wrt, points=points, steps=(args.step,), device=device, report=lambda message: None)
+            walker_gradient(scene, p, wrt, points=points, steps=(args.step,), device=device,
+                            report=lambda message: None)  # fmt: skip
 
         return make
 

@@ -113,8 +113,8 @@ def main(argv=None) -> int:
     parser.add_argument("--scene", default="prism-walker")
     parser.add_argument("--wrt", nargs="*", default=["AC", "thickness", "elongation"],
                         help="per-world parameters (elongation: the rest shape stretched along the wave)")
-    parser.add_argument("--points", default=(), type=lambda text: text if text == "all" else [int(i) for i in text.split(",")],
-                        metavar="I[,I...]|all", help="the rest shape's control points designed too")  # fmt: skip
+    parser.add_argument("--points", default=(), metavar="I[,I...]|all", help="the rest shape's control points designed too",
+                        type=lambda text: text if text == "all" else [int(i) for i in text.split(",")])  # fmt: skip
     parser.add_argument("--periods", type=float, default=1.0, help="the horizon, in periods of the FHN kinetics")
     parser.add_argument("--iterations", type=int, default=8)
     parser.add_argument("--rate", type=float, default=0.2, help="the first step: the most sensitive θ moves by e^rate")
@@ -141,7 +141,8 @@ def main(argv=None) -> int:
     def objective_and_gradient(theta):
         parameters = {name: theta[name] for name in args.wrt}
         result = walker_gradient(module, replace(p, **parameters), args.wrt, points=points, device=device,
-                                 rest_shape=rest_shape(theta), steps=(args.step,), report=lambda message: None)  # fmt: skip
+                                 rest_shape=rest_shape(theta), steps=(args.step,),
+                                 report=lambda message: None)  # fmt: skip
         shape = {name: float(result["shape_gradient"][points.index(i), a]) for name, (i, a) in coordinates.items()}
         return result["objective"], {**result["gradient"], **shape}
 

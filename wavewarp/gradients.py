@@ -125,8 +125,9 @@ def check_differentiable(run, wrt, objective: str = "height", points=()) -> None
                             "self_contact=false")  # fmt: skip
     control_points(points, run.mesh.n_vertices)
     if len(points) and run.dt_changes:
-        raise GradientError("the shape gradient replays the run's wave on each moved rest shape with the run's steps, "
-                            "and this run changed its step on the way: --set adaptive_dt=false or a smaller dt")  # fmt: skip
+        raise GradientError("the shape gradient replays the run's wave on each moved rest shape with the run's "
+                            "steps, and this run changed its step on the way: --set adaptive_dt=false or a smaller "
+                            "dt")  # fmt: skip
 
 
 def scene_gradient(run, wrt=(), objective: str = "height", points=()) -> dict:

@@ -99,9 +99,9 @@ def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: 
     unperturbed world, "derivatives": {name: [dD/dθ(t) per step]}, "period": the unperturbed world's measured period
     (None if fewer than two pulses), "period_kinetic": the FHN kinetics' period, "settle_dt": the mechanics steps the
     worlds settled and walk with (`WalkerRun`'s `mechanics_dt`)}; with `points`, also "points" (the indices),
-    "rest_vertices" (the control points the gradient is taken at, V × 3), "shape_gradient" (dJ/dX, P × 3 NumPy, per unit length),
-    "shape_agreement" (‖g(δ₁) - g(δ_k)‖ / ‖g(δ_k)‖), "shape_deltas" ([δ...], lengths) and "shape_derivatives"
-    (dD/dX(t): steps × P × 3 × times)."""
+    "rest_vertices" (the control points the gradient is taken at, V × 3), "shape_gradient" (dJ/dX, P × 3
+    NumPy, per unit length), "shape_agreement" (‖g(δ₁) - g(δ_k)‖ / ‖g(δ_k)‖), "shape_deltas" ([δ...], lengths)
+    and "shape_derivatives" (dD/dX(t): steps × P × 3 × times)."""
     check_walker_differentiable(wrt, objective, steps, points)
     check_walker_values(p, wrt, steps)
     p = replace(p, dtype="float64")
@@ -110,17 +110,12 @@ def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: 
     points = control_points(points, len(rest))
     base = np.zeros_like(rest) if rest_shape is None else np.asarray(rest_shape, dtype=np.float64)
     if base.shape != rest.shape:
-        raise WalkerGradientError(f"rest_shape: a {rest.shape} displacement of the scene's control points, not {base.shape}")
+        raise WalkerGradientError(f"rest_shape: a {rest.shape} displacement of the scene's control points, not "
+                                  f"{base.shape}")  # fmt: skip
     rest = rest + base
-    displacements = [base] * len(worlds)
     scale = control_scale(rest)
-    for point in points:
-        for axis in range(3):
-            for step in steps:
-                for sign in (1, -1):
-                    worlds.append((("shape", point, axis), step * scale, sign, p))
-                    displacements.append(base.copy())
-                    displacements[-1][point, axis] += sign * step * scale
+    moved, displacements = shape_worlds(p, points, steps, base, scale)
+    worlds, displacements = worlds + moved, [base] * len(worlds) + displacements
     shaped = points or rest_shape is not None
     batch = scene.build_batch([q for *_, q in worlds], seeds=[seed] * len(worlds), device=device, report=report,
                               rest_shapes=(lambda mesh: displacements) if shaped else None)  # fmt: skip
@@ -145,16 +140,31 @@ def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: 
     result = {"objective": float(ends[0]), "gradient": {name: float(differences[name][-1]) for name in wrt},
               "agreement": {name: relative_disagreement(differences[name]) for name in wrt}, "steps": list(steps),
               "deltas": {name: deltas[name] for name in wrt}, "times": batch.traces[0][:, 0], "distance": distances[0],
-              "derivatives": {name: derivatives[name] for name in wrt}, "period": batch.measurements(0, batch.time)["period"],
-              "period_kinetic": batch.period_kinetic, "settle_dt": batch.settle_dt}  # fmt: skip
+              "derivatives": {name: derivatives[name] for name in wrt},
+              "period": batch.measurements(0, batch.time)["period"], "period_kinetic": batch.period_kinetic,
+              "settle_dt": batch.settle_dt}  # fmt: skip
     if points:
         keys = [("shape", point, axis) for point in points for axis in range(3)]
         by_step = np.array([[differences[key][k] for key in keys] for k in range(len(steps))])  # steps × 3P
+        series = np.array([[derivatives[key][k] for key in keys] for k in range(len(steps))])
         result.update(points=points, rest_vertices=rest, shape_gradient=by_step[-1].reshape(len(points), 3),
                       shape_agreement=relative_disagreement(list(by_step)), shape_deltas=[step * scale for step in steps],
-                      shape_derivatives=np.array([[derivatives[key][k] for key in keys] for k in range(len(steps))])
-                      .reshape(len(steps), len(points), 3, -1))  # fmt: skip
+                      shape_derivatives=series.reshape(len(steps), len(points), 3, -1))  # fmt: skip
     return result
+
+
+def shape_worlds(p, points, steps, base: np.ndarray, scale: float) -> tuple:
+    """([(("shape", point, axis), δ, sign, p)], [rest displacement]) for each control coordinate, step and sign:
+    `base` with that coordinate moved by sign × δ, δ = step × `scale`."""
+    worlds, displacements = [], []
+    for point in points:
+        for axis in range(3):
+            for step in steps:
+                for sign in (1, -1):
+                    worlds.append((("shape", point, axis), step * scale, sign, p))
+                    displacements.append(base.copy())
+                    displacements[-1][point, axis] += sign * step * scale
+    return worlds, displacements
 
 
 def relative_disagreement(values) -> float:
