@@ -55,6 +55,29 @@ def test_the_gradient_of_the_last_equilibrium_matches_central_differences_of_who
     assert result["gradient"][name] == pytest.approx(expected, rel=1e-5)
 
 
+def volume_of(run) -> float:
+    return run.shell.volume(run.frame()["positions"])
+
+
+def distance_of(run, first=5, second=40) -> float:
+    points = limit_positions(run.mesh, run.frame()["positions"], device="cpu", dtype="float64")
+    return float(np.linalg.norm(points[first] - points[second]))
+
+
+@pytest.mark.parametrize("objective, measure", [("volume", volume_of), ("distance:5,40", distance_of)])
+def test_other_objectives_match_central_differences_of_whole_runs(objective, measure):
+    """The enclosed volume (a softer volume penalty, μV = 0.5, lets it move) and the distance between two
+    material points, each recomputed from the runs' own positions."""
+    run = starfish(mu_v=0.5)
+    result = scene_gradient(run, ["AC"], objective)
+    assert result["objective"] == pytest.approx(measure(run), rel=1e-9)
+    delta = 1e-4 * run.p.AC
+    plus, minus = (measure(starfish(mu_v=0.5, AC=run.p.AC + sign * delta)) for sign in (1.0, -1.0))
+    expected = (plus - minus) / (2 * delta)
+    assert abs(expected) * run.p.AC > 1e-4 * result["objective"]  # a gradient that matters
+    assert result["gradient"]["AC"] == pytest.approx(expected, rel=1e-5)  # measured 2e-9 (volume), 2e-8
+
+
 def test_the_rest_shapes_gradient_matches_central_differences_of_whole_runs():
     """dJ/dX̄ of two control points (every coordinate) against whole runs from rest meshes with that one
     coordinate moved by ±1e-4 L: their waves, rest metrics and volumes all move with it."""
@@ -125,6 +148,8 @@ def test_grad_command_prints_the_objective_and_its_gradient(capsys):
         (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "radius"], "differentiable parameters are"),
         (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "AC", "--objective", "speed"], "objectives are"),
         (["starfish", "--quick", "--set", "sensitive=false", "--points", "5,99999"], "between 0 and 641"),
+        (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "AC", "--objective", "distance:3,3"],
+         "two different control points"),
     ],
 )
 def test_grad_refuses_what_it_cannot_differentiate_and_names_the_fix(argv, message, capsys):

@@ -348,7 +348,7 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grad.add_argument("--points", default=(), type=_control_points, metavar="I[,I...]|all",
                       help="the rest shape's control points (vertex indices of the scene's mesh, or all) "
                       "whose coordinates the gradient dJ/dX is taken over, per unit length")  # fmt: skip
-    grad.add_argument("--objective", default=None, help=f"quasi-static: {', '.join(OBJECTIVES)} (default); walkers: "
+    grad.add_argument("--objective", default=None, help=f"quasi-static: {', '.join(OBJECTIVES)} (default height); walkers: "
                       f"{', '.join(WALKER_OBJECTIVES)} (default: the centre of mass's displacement along the wave, R)")
     grad.add_argument("--steps", type=_relative_steps, default=WALKER_STEPS, metavar="S1,S2",
                       help="walkers: relative steps of the central differences; the largest against the smallest is "

@@ -18,13 +18,14 @@ from typing import Callable
 
 import numpy as np
 import scipy.sparse as sparse
+import warp as wp
 
 from .mesh import Mesh
 from .newton import NewtonFinish, ShiftedInverse, rigid_modes
 from .quasistatic import QuasiStaticWaveRun, initial_values, quasi_static_model
 
 PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v")  # the quasi-static scenes' shell parameters
-OBJECTIVES = ("height",)
+OBJECTIVES = ("height", "volume", "distance:I,J")  # I, J: control point indices
 POLISH_TOL = 1e-11  # residual strain the equilibrium is polished to before the adjoint solve
 DIFFERENCE_STEP = 1e-5  # relative step of a parameter's central difference (absolute where it is 0)
 REFINEMENTS = 8  # iterative refinement of the adjoint on the Hessian action
@@ -38,11 +39,15 @@ class GradientError(ValueError):
 def height(mesh, origin) -> Callable:
     """J(x) = distance between the limit points of the control vertex nearest `origin` and of the one
     farthest from it (the rest shape's pole and antipode): (J, ∇J as (V, 3))."""
+    distance = np.linalg.norm(mesh.vertices - np.asarray(origin, dtype=np.float64), axis=1)
+    return material_distance(mesh, int(np.argmin(distance)), int(np.argmax(distance)))
+
+
+def material_distance(mesh, first: int, second: int) -> Callable:
+    """J(x) = distance between the limit points of control vertices `first` and `second`: (J, ∇J as (V, 3))."""
     rows, cols, vals = mesh.limit_mask_matrix()
     mask = sparse.csr_matrix((vals, (rows, cols)), shape=(mesh.n_vertices, mesh.n_vertices))
-    distance = np.linalg.norm(mesh.vertices - np.asarray(origin, dtype=np.float64), axis=1)
-    pole_row = mask[int(np.argmin(distance))] - mask[int(np.argmax(distance))]
-    weights = pole_row.toarray().ravel()  # the pole's limit point less the antipode's, per control point
+    weights = (mask[first] - mask[second]).toarray().ravel()  # the first's limit point less the second's
 
     def objective(x):
         axis = weights @ x
@@ -105,14 +110,50 @@ def equilibrium_gradient(shell_for: Callable, x: np.ndarray, c: np.ndarray, obje
     return {"objective": value, "gradient": gradient, "equilibrium": x, "residual": residual, "adjoint": lam}
 
 
+def enclosed_volume(shell) -> Callable:
+    """J(x) = the volume the limit surface encloses (`shell`, float64): (J, ∇J as (V, 3))."""
+    with wp.ScopedDevice(shell.device):
+        positions, gradient = (wp.zeros(shell.mesh.n_vertices, dtype=shell.vec3) for _ in range(2))
+
+    def objective(x):
+        positions.assign(x)
+        shell.volume_gradient_device(positions, gradient)
+        return shell.volume(x), gradient.numpy().astype(np.float64)
+
+    return objective
+
+
+def objective_for(run, name: str) -> Callable:
+    """The objective named (OBJECTIVES; "distance:I,J" with control point indices) on `run`'s mesh."""
+    if name == "height":
+        return height(run.mesh, run.origin)
+    if name == "volume":
+        p = replace(run.p, dtype="float64")
+        return enclosed_volume(quasi_static_model(run.mesh, [p], size=run.size, rule=run.shell.rule,
+                                                  device=run.shell.device).shell)  # fmt: skip
+    first, second = distance_points(name, run.mesh.n_vertices)
+    return material_distance(run.mesh, first, second)
+
+
+def distance_points(name: str, count: int) -> tuple:
+    """(I, J) of the objective "distance:I,J", checked against `count` control points."""
+    try:
+        kind, indices = name.split(":")
+        first, second = (int(i) for i in indices.split(","))
+    except ValueError:
+        kind = None
+    if kind != "distance" or not (0 <= first < count and 0 <= second < count) or first == second:
+        raise GradientError(f"--objective {name}: objectives are height, volume and distance:I,J with two different "
+                            f"control points I, J between 0 and {count - 1}")  # fmt: skip
+    return first, second
+
+
 def check_differentiable(run, wrt, objective: str = "height", points=()) -> None:
     """Raise GradientError, naming the fix, where `scene_gradient(run, wrt, objective, points)` cannot be taken."""
     unknown = [name for name in wrt if name not in PARAMETERS]
     if unknown or not (len(wrt) or len(points)):
         raise GradientError(f"--wrt {','.join(unknown) or '(nothing)'}: differentiable parameters are "
                             f"{', '.join(PARAMETERS)}")  # fmt: skip
-    if objective not in OBJECTIVES:
-        raise GradientError(f"--objective {objective}: objectives are {', '.join(OBJECTIVES)}")
     if not isinstance(run, QuasiStaticWaveRun):
         raise GradientError(f"{getattr(run, 'name', 'this scene')} is not a quasi-static scene: gradients through the walkers' dynamics are not "
                             "built; take one of the oocyte, wave-guide or buckling scenes")  # fmt: skip
@@ -123,6 +164,8 @@ def check_differentiable(run, wrt, objective: str = "height", points=()) -> None
     if run.shell.self_contact is not None:
         raise GradientError("the adjoint uses the Newton finish's Hessian, which leaves self-contact out: --set "
                             "self_contact=false")  # fmt: skip
+    if objective not in OBJECTIVES[:2]:
+        distance_points(objective, run.mesh.n_vertices)
     control_points(points, run.mesh.n_vertices)
     if len(points) and run.dt_changes:
         raise GradientError("the shape gradient replays the run's wave on each moved rest shape with the run's "
@@ -145,7 +188,7 @@ def scene_gradient(run, wrt=(), objective: str = "height", points=()) -> dict:
     x = run.frame()["positions"].astype(np.float64)
     c = run.shell.reference_c.numpy().astype(np.float64)
     values = {name: float(getattr(run.p, name)) for name in wrt}
-    result = equilibrium_gradient(shell_for, x, c, height(run.mesh, run.origin), values)
+    result = equilibrium_gradient(shell_for, x, c, objective_for(run, objective), values)
     if len(points):
         chosen = control_points(points, run.mesh.n_vertices)
         result.update(points=chosen, shape_gradient=shape_gradient(run, result, c, chosen))

@@ -185,7 +185,7 @@ class Shell:
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
         self.edge_length = float(np.mean(lengths))  # ℓ̄ over every world
         self.world_edge_lengths = np.array([np.mean(world) for world in np.split(lengths, worlds)])  # each world's
-        self._c_host = None
+        self.update_reference(self._c)  # the rest reference (c = 0) until a wave sets one: no array read unset
         self._relaxation = None  # relax's device buffers and captured loop (wavewarp/relax.py), built on first use
         self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
         self.newton_steps = 0  # Newton steps of the last relaxation
