@@ -256,6 +256,21 @@ def test_a_walker_displaced_rigidly_walks_as_before():
         walker_gradient(module, p, points=[5], rest_shape=shift[:-1], device="cpu", report=lambda m: None)
 
 
+def test_worlds_split_into_batches_give_the_one_batchs_gradient():
+    """`max_worlds`: 1 + 8 worlds as batches of 5 and 4, the second given the first's steps. The first batch
+    chooses its settling step from its own worlds' bounds, not all nine: the runs differ by that choice alone."""
+    module = load_scene("sphere-walker")
+    p = resolve(module.Parameters, module.QUICK, COARSE)
+    whole, split = (walker_gradient(module, p, ["AC"], points=[3], steps=(1e-4,), max_worlds=size, device="cpu",
+                                    report=lambda m: None) for size in (None, 5))  # fmt: skip
+    assert split["objective"] == pytest.approx(whole["objective"], rel=1e-9)  # the first batch chose its steps
+    assert split["gradient"]["AC"] == pytest.approx(whole["gradient"]["AC"], rel=1e-6)  # measured 2e-8
+    assert split["shape_gradient"] == pytest.approx(whole["shape_gradient"], rel=1e-6,
+                                                    abs=1e-8 * np.abs(whole["shape_gradient"]).max())  # fmt: skip
+    with pytest.raises(WalkerGradientError, match="at least 1"):
+        walker_gradient(module, p, ["AC"], max_worlds=0, device="cpu", report=lambda m: None)
+
+
 @pytest.mark.slow
 def test_the_shape_gradient_of_every_control_point_knows_translations_and_the_elongation():
     """Two answers known in advance: translating the rest shape rigidly does not change the walk (the ground is

@@ -235,7 +235,8 @@ def _gradient(args) -> int:
     if issubclass(module.Parameters, WalkerParameters):
         objective = args.objective or WALKER_OBJECTIVES[0]
         result = walker_gradient(module, p, args.wrt, points=args.points, objective=objective, steps=args.steps,
-                                 seed=args.seed, device=args.device, report=report)  # fmt: skip
+                                 seed=args.seed, max_worlds=args.max_worlds, device=args.device,
+                                 report=report)  # fmt: skip
         extra = {"agreement": result["agreement"], "steps": result["steps"], "period": result["period"]}
         if args.points:
             extra["shape_gradient"] = {"points": result["points"], "gradient": result["shape_gradient"].tolist(),
@@ -348,6 +349,9 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grad.add_argument("--points", default=(), type=_control_points, metavar="I[,I...]|all",
                       help="the rest shape's control points (vertex indices of the scene's mesh, or all) "
                       "whose coordinates the gradient dJ/dX is taken over, per unit length")  # fmt: skip
+    grad.add_argument("--max-worlds", type=int, default=None, metavar="N",
+                      help="walkers: at most N worlds a batch (device memory; the rest run in further batches given "
+                      "the first's steps)")  # fmt: skip
     grad.add_argument("--objective", default=None, help=f"quasi-static: {', '.join(OBJECTIVES)} (default height); walkers: "
                       f"{', '.join(WALKER_OBJECTIVES)} (default: the centre of mass's displacement along the wave, R)")
     grad.add_argument("--steps", type=_relative_steps, default=WALKER_STEPS, metavar="S1,S2",

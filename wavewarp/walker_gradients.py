@@ -85,13 +85,15 @@ def forward_distance(trace: np.ndarray, forward, radius: float) -> np.ndarray:
 
 
 def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: str = "distance", steps=STEPS,
-                    seed: int = 0, device=None, report=print) -> dict:  # fmt: skip
+                    seed: int = 0, max_worlds=None, device=None, report=print) -> dict:  # fmt: skip
     """dJ/dθ of a walker `scene` (a scene module: its `build_batch(ps, seeds=, device=, report=, mechanics_dt=,
     rest_shapes=)` and `recipe(p)`) at parameters `p` for the parameters named in `wrt`, by central differences over
     one float64 batch (PER_WORLD), and over batches of one world stepped as that batch (SHARED); and dJ/dX of the rest
     shape's control points `points` (vertex indices of the scene's mesh, or "all"), each coordinate's ± worlds in
     the main batch (δ = step × the control points' RMS distance from their centroid). `rest_shape`: a (V, 3)
     displacement of the scene's control points that every world starts from (None: the scene's shape).
+    `max_worlds`: at most that many worlds a batch (device memory); the worlds past the first batch run in
+    further batches given its chemistry and mechanics steps, as the shared parameters' do.
 
     Returns {"objective": J (`objective`: the distance at the end, or the speed), "gradient": {name: dJ/dθ with the
     smallest step}, "agreement": {name: |g(δ₁) - g(δ_k)| / |g(δ_k)|, the largest step against the smallest},
@@ -117,10 +119,20 @@ def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: 
     moved, displacements = shape_worlds(p, points, steps, base, scale)
     worlds, displacements = worlds + moved, [base] * len(worlds) + displacements
     shaped = points or rest_shape is not None
-    batch = scene.build_batch([q for *_, q in worlds], seeds=[seed] * len(worlds), device=device, report=report,
-                              rest_shapes=(lambda mesh: displacements) if shaped else None)  # fmt: skip
+    size = len(worlds) if max_worlds is None else int(max_worlds)
+    if size < 1:
+        raise WalkerGradientError(f"max_worlds {max_worlds}: give at least 1 world a batch")
+    batch = scene.build_batch([q for *_, q in worlds[:size]], seeds=[seed] * min(size, len(worlds)), device=device,
+                              report=report, rest_shapes=(lambda mesh: displacements[:size]) if shaped else None)  # fmt: skip
     forward, radius = batch.placed[0].forward, batch.radius
-    traces = list(finished(batch, worlds))
+    traces = list(finished(batch, worlds[:size]))
+    for start in range(size, len(worlds), size):  # the rest, stepped as the first batch
+        chunk = slice(start, start + size)
+        more = scene.build_batch([replace(q, dt=batch.wave.dt) for *_, q in worlds[chunk]],
+                                 seeds=[seed] * len(worlds[chunk]), device=device, report=report,
+                                 mechanics_dt=batch.settle_dt,
+                                 rest_shapes=(lambda mesh, part=displacements[chunk]: part) if shaped else None)  # fmt: skip
+        traces += finished(more, worlds[chunk])
     # the shared parameters' worlds: one batch each, stepped as the main batch
     pinned = replace(p, dt=batch.wave.dt)
     for name, delta, sign, q in perturbed_worlds(pinned, [name for name in wrt if name in SHARED], steps)[1:]:
