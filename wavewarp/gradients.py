@@ -155,8 +155,9 @@ def check_differentiable(run, wrt, objective: str = "height", points=()) -> None
         raise GradientError(f"--wrt {','.join(unknown) or '(nothing)'}: differentiable parameters are "
                             f"{', '.join(PARAMETERS)}")  # fmt: skip
     if not isinstance(run, QuasiStaticWaveRun):
-        raise GradientError(f"{getattr(run, 'name', 'this scene')} is not a quasi-static scene: gradients through the walkers' dynamics are not "
-                            "built; take one of the oocyte, wave-guide or buckling scenes")  # fmt: skip
+        raise GradientError(f"{getattr(run, 'name', 'this scene')} is not a quasi-static scene: take one of the "
+                            "oocyte, wave-guide or buckling scenes; a walker's gradient is walker_gradient's "
+                            "(wavewarp/walker_gradients.py, the same `wavewarp grad`)")  # fmt: skip
     if run.p.sensitive:
         raise GradientError("the wave runs on the deforming shell (sensitive=true), so its path depends on the "
                             "parameters and the last equilibrium alone does not give the gradient: --set "

@@ -126,20 +126,18 @@ def walker_gradient(scene, p, wrt=(), *, points=(), rest_shape=None, objective: 
                               report=report, rest_shapes=(lambda mesh: displacements[:size]) if shaped else None)  # fmt: skip
     forward, radius = batch.placed[0].forward, batch.radius
     traces = list(finished(batch, worlds[:size]))
-    for start in range(size, len(worlds), size):  # the rest, stepped as the first batch
-        chunk = slice(start, start + size)
-        more = scene.build_batch([replace(q, dt=batch.wave.dt) for *_, q in worlds[chunk]],
-                                 seeds=[seed] * len(worlds[chunk]), device=device, report=report,
-                                 mechanics_dt=batch.settle_dt,
-                                 rest_shapes=(lambda mesh, part=displacements[chunk]: part) if shaped else None)  # fmt: skip
-        traces += finished(more, worlds[chunk])
-    # the shared parameters' worlds: one batch each, stepped as the main batch
-    pinned = replace(p, dt=batch.wave.dt)
-    for name, delta, sign, q in perturbed_worlds(pinned, [name for name in wrt if name in SHARED], steps)[1:]:
-        alone = scene.build_batch([q], seeds=[seed], device=device, report=report, mechanics_dt=batch.settle_dt,
-                                  rest_shapes=(lambda mesh: [base]) if shaped else None)  # fmt: skip
-        traces += finished(alone, [(name, delta, sign, q)])
-        worlds.append((name, delta, sign, q))
+
+    def stepped_as_first(entries, shapes) -> list:  # the traces of `entries` run as one more batch, given its steps
+        more = scene.build_batch([replace(q, dt=batch.wave.dt) for *_, q in entries], seeds=[seed] * len(entries),
+                                 device=device, report=report, mechanics_dt=batch.settle_dt,
+                                 rest_shapes=(lambda mesh: shapes) if shaped else None)  # fmt: skip
+        return finished(more, entries)
+
+    for start in range(size, len(worlds), size):  # the rest of the batch's worlds
+        traces += stepped_as_first(worlds[start:start + size], displacements[start:start + size])
+    for entry in perturbed_worlds(p, [name for name in wrt if name in SHARED], steps)[1:]:  # one ground a batch
+        traces += stepped_as_first([entry], [base])
+        worlds.append(entry)
     distances = [forward_distance(trace, forward, radius) for trace in traces]
     ends = [objective_value(objective, trace, distance, forward, radius, batch.period_kinetic)
             for trace, distance in zip(traces, distances)]  # fmt: skip
