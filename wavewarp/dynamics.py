@@ -157,6 +157,8 @@ class InertialSolver:
             self.body = BodyFrame(wp.zeros(self.worlds, dtype=self.vec3))  # the lab frame: U = 0
         self.contact_damping = self._contact_damping()
 
+    inverse_mass = property(lambda self: self._inverse_mass)  # 1/M per control point, on the device
+
     def state(self, x0=None, v0=None) -> State:
         """x0 (default: the mesh's own positions) and v0 (default 0), checked, on the device."""
         n = self.shell.mesh.n_vertices

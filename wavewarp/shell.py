@@ -156,8 +156,9 @@ class Shell:
         self.reference = (KoiterReference(self.world_arrays(self._AC, self._AI)) if model == "koiter" else
                           BilayerReference(self.world_arrays(self._AC, (self._AC / 2 - self._AI) / self._bilayer_radius)))
         nu = self.poisson
-        self._moduli = self.world_arrays(self._young * self._thickness / (8 * (1 - nu**2)),
-                                         self._young * self._thickness**3 / (24 * (1 - nu**2)))  # fmt: skip
+        stretching, bending = self._young * self._thickness / (8 * (1 - nu**2)), self._young * self._thickness**3 / (24 * (1 - nu**2))
+        self.moduli = (world_value(stretching), world_value(bending))  # the stretching and bending moduli
+        self._moduli = self.world_arrays(stretching, bending)
         m22 = mat22(self.scalar)
         with wp.ScopedDevice(self.device):
             self._penalty = wp.array(self._volume_penalty, dtype=wp.float64)
@@ -346,6 +347,12 @@ class Shell:
             target = wp.array(np.atleast_1d(self._volume_of(x)) + 1.0, dtype=wp.float64)
             penalty = wp.full(self.worlds, 0.5, dtype=wp.float64)
         self._force_terms(x, gradient, None, (zero, zero), target, penalty, True, contact=False)
+
+    def term_forces_device(self, x: wp.array, forces: wp.array, stretching: wp.array, bending: wp.array,
+                           volume_penalty: wp.array) -> None:  # fmt: skip
+        """forces = -∂E/∂x with the stretching and bending moduli and the volume penalty given (per-world device
+        arrays; the penalty float64) at the current reference: one term at unit weight (wavewarp/adjoint.py)."""
+        self._force_terms(x, forces, None, (stretching, bending), self._target, volume_penalty, True, contact=False)
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and

@@ -252,7 +252,7 @@ class WalkerRun(WaveClock):
         self.origin_vertex, self.forward = placed.origin_vertex, placed.forward
         self.model = walker_model(mesh, [p], placed.ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
-        self.dynamics, _ = settled_walker_dynamics(self.model, p, mechanics_dt)
+        self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p, mechanics_dt)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
         settled = self.dynamics.positions()
         self.rest_height = float(self.dynamics.mass @ mesh.vertices[:, 2] / self.dynamics.total_mass)  # rigid, in contact

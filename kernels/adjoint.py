@@ -1,0 +1,206 @@
+"""Adjoint kernels of the walkers' overdamped step (docs/theory/gradients.md, "Reverse mode"), each with its
+launcher. One world; the accumulators (norms, parameter gradients) are float64 and summed atomically."""
+
+from typing import Any
+
+import warp as wp
+
+from . import declare_overloads, scalar_of
+
+
+@wp.kernel
+def largest_component_kernel(d: wp.array(dtype=Any), largest: wp.array(dtype=wp.float64)):
+    """largest[0] = max over i of the largest |component| of d_i (zeroed by the caller)."""
+    i = wp.tid()
+    a = d[i]
+    wp.atomic_max(largest, 0, wp.float64(wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))))
+
+
+@wp.kernel
+def probe_kernel(x: wp.array(dtype=Any), d: wp.array(dtype=Any), largest: wp.array(dtype=wp.float64), step: Any,
+                 out: wp.array(dtype=Any)):  # fmt: skip
+    """out = x + step d / max|d| (x where d = 0): a probe at a fixed length `step` along d."""
+    i = wp.tid()
+    size = largest[0]
+    if size > wp.float64(0.0):
+        out[i] = x[i] + (step / type(step)(size)) * d[i]
+    else:
+        out[i] = x[i]
+
+
+@wp.kernel
+def directional_difference_kernel(plus: wp.array(dtype=Any), minus: wp.array(dtype=Any),
+                                  largest: wp.array(dtype=wp.float64), step: Any, out: wp.array(dtype=Any)):  # fmt: skip
+    """out += (plus - minus) max|d| / (2 step): the central difference of F(x ± step d/max|d|), the derivative along d."""
+    i = wp.tid()
+    out[i] = out[i] + (type(step)(largest[0]) / (type(step)(2.0) * step)) * (plus[i] - minus[i])
+
+
+@wp.kernel
+def weighted_dot_kernel(a: wp.array(dtype=Any), b: wp.array(dtype=Any), weight: wp.float64, slot: int,
+                        total: wp.array(dtype=wp.float64)):  # fmt: skip
+    """total[slot] += weight Σ a_i · b_i."""
+    i = wp.tid()
+    wp.atomic_add(total, slot, weight * wp.float64(wp.dot(a[i], b[i])))
+
+
+@wp.kernel
+def overdamped_velocity_adjoint_kernel(
+    x_hat: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), inverse_drag: Any, dt: Any,
+    v_hat: wp.array(dtype=Any), w_hat: wp.array(dtype=Any), force_hat: wp.array(dtype=Any),
+):  # fmt: skip
+    """Adjoint of v' = F/(ζ M), x' = x + dt v': ŵ = v̂' + dt x̂' (the new velocity's), F̂ = ŵ / (ζ M); v̂ = 0 (the old
+    velocity reaches v' through the ground alone, added after)."""
+    i = wp.tid()
+    w = v_hat[i] + dt * x_hat[i]
+    w_hat[i] = w
+    force_hat[i] = (inverse_drag * inverse_mass[i]) * w
+    v_hat[i] = type(w)()
+
+
+@wp.func
+def friction_factor(speed: Any, k_f: Any):
+    """(φ, φ'/s) of φ(s) = tanh(k_f s)/s, by its series where k_f s is small (φ → k_f, φ'/s → -2k_f³/3)."""
+    ks = k_f * speed
+    if ks < type(ks)(1e-4):
+        return k_f * (type(ks)(1.0) - ks * ks / type(ks)(3.0)), type(ks)(-2.0 / 3.0) * k_f * k_f * k_f
+    t = wp.tanh(ks)
+    phi = t / speed
+    return phi, (k_f * (type(ks)(1.0) - t * t) - phi) / (speed * speed)
+
+
+@wp.kernel
+def ground_adjoint_kernel(
+    p: wp.array(dtype=Any), u: wp.array(dtype=Any), force_hat: wp.array(dtype=Any), k: Any, beta: Any, mu: Any,
+    k_f: Any, p_hat: wp.array(dtype=Any), u_hat: wp.array(dtype=Any), gradient: wp.array(dtype=wp.float64),
+):  # fmt: skip
+    """Adjoint of the explicit ground law at a limit point (kernels/contact.py: F_n = max(k z² - β u_z, 0) where z ≤ 0,
+    F_f = -μ F_n φ(|u_t|) u_t with φ(s) = tanh(k_f s)/s), given f̂ = L F̂: p̂, û (overwritten) and
+    gradient[0..3] += ∂/∂(k, β, μ, k_f) of f̂ · f."""
+    i = wp.tid()
+    a = force_hat[i]
+    z = p[i][2]
+    zero = type(z)(0.0)
+    fn = k * z * z - beta * u[i][2]
+    p_hat[i] = type(a)()
+    u_hat[i] = type(a)()
+    if z > zero or fn < zero:
+        return
+    u_t = type(a)(u[i][0], u[i][1], zero)
+    a_t = type(a)(a[0], a[1], zero)
+    phi, slope = friction_factor(wp.length(u_t), k_f)
+    load = wp.dot(a_t, u_t)
+    fn_hat = a[2] - mu * phi * load
+    u_hat_t = -(mu * fn) * (phi * a_t + (slope * load) * u_t)
+    speed = wp.length(u_t)
+    ks = k_f * speed
+    sech2 = type(z)(1.0) - wp.tanh(ks) * wp.tanh(ks)
+    p_hat[i] = type(a)(zero, zero, type(z)(2.0) * k * z * fn_hat)
+    u_hat[i] = u_hat_t + type(a)(zero, zero, -beta * fn_hat)
+    wp.atomic_add(gradient, 0, wp.float64(fn_hat * z * z))
+    wp.atomic_add(gradient, 1, wp.float64(-fn_hat * u[i][2]))
+    wp.atomic_add(gradient, 2, wp.float64(-fn * phi * load))
+    wp.atomic_add(gradient, 3, wp.float64(-mu * fn * sech2 * load))
+
+
+@wp.kernel
+def push_vectors_kernel(source: wp.array(dtype=wp.vec3d), counter: wp.array(dtype=wp.int32),
+                        store: wp.array2d(dtype=wp.vec3d)):  # fmt: skip
+    """store[counter[0], i] = source[i]: a row of the stored trajectory at the device's own index (float64: the
+    reverse mode's dtype; one kernel per element type, as Warp's CPU graphs replay one overload per kernel)."""
+    i = wp.tid()
+    store[counter[0], i] = source[i]
+
+
+@wp.kernel
+def push_scalars_kernel(source: wp.array(dtype=wp.float64), counter: wp.array(dtype=wp.int32),
+                        store: wp.array2d(dtype=wp.float64)):  # fmt: skip
+    """store[counter[0], i] = source[i]."""
+    i = wp.tid()
+    store[counter[0], i] = source[i]
+
+
+@wp.kernel
+def pull_vectors_kernel(store: wp.array2d(dtype=wp.vec3d), counter: wp.array(dtype=wp.int32), offset: int,
+                        out: wp.array(dtype=wp.vec3d)):  # fmt: skip
+    """out[i] = store[counter[0] + offset, i]."""
+    i = wp.tid()
+    out[i] = store[counter[0] + offset, i]
+
+
+@wp.kernel
+def pull_scalars_kernel(store: wp.array2d(dtype=wp.float64), counter: wp.array(dtype=wp.int32), offset: int,
+                        out: wp.array(dtype=wp.float64)):  # fmt: skip
+    """out[i] = store[counter[0] + offset, i]."""
+    i = wp.tid()
+    out[i] = store[counter[0] + offset, i]
+
+
+@wp.kernel
+def count_kernel(counter: wp.array(dtype=wp.int32), by: int):
+    """counter[0] += by (one thread)."""
+    counter[0] = counter[0] + by
+
+
+declare_overloads(largest_component_kernel, d="vec3[]")
+declare_overloads(probe_kernel, x="vec3[]", d="vec3[]", step="scalar", out="vec3[]")
+declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", step="scalar", out="vec3[]")
+declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
+declare_overloads(overdamped_velocity_adjoint_kernel, x_hat="vec3[]", inverse_mass="scalar[]", inverse_drag="scalar",
+                  dt="scalar", v_hat="vec3[]", w_hat="vec3[]", force_hat="vec3[]")  # fmt: skip
+declare_overloads(ground_adjoint_kernel, p="vec3[]", u="vec3[]", force_hat="vec3[]", k="scalar", beta="scalar",
+                  mu="scalar", k_f="scalar", p_hat="vec3[]", u_hat="vec3[]")  # fmt: skip
+
+
+# ---------------------------------------------------------------- launchers
+
+
+def eval_push(source: wp.array, counter: wp.array, store: wp.array) -> None:
+    """store[counter] = source (the row the device's counter names)."""
+    kernel = push_scalars_kernel if source.dtype == wp.float64 else push_vectors_kernel
+    wp.launch(kernel, dim=len(source), inputs=[source, counter], outputs=[store], device=source.device)
+
+
+def eval_pull(store: wp.array, counter: wp.array, offset: int, out: wp.array) -> None:
+    """out = store[counter + offset]."""
+    kernel = pull_scalars_kernel if out.dtype == wp.float64 else pull_vectors_kernel
+    wp.launch(kernel, dim=len(out), inputs=[store, counter, int(offset)], outputs=[out], device=out.device)
+
+
+def eval_count(counter: wp.array, by: int) -> None:
+    """counter += by, on the device."""
+    wp.launch(count_kernel, dim=1, inputs=[counter, int(by)], device=counter.device)
+
+
+def eval_directional_derivative(x: wp.array, d: wp.array, step: float, evaluate, largest: wp.array, probe: wp.array,
+                                plus: wp.array, minus: wp.array, out: wp.array) -> None:  # fmt: skip
+    """out += D_d F(x) = the central difference of `evaluate(probe, forces)` at x ± step d/max|d| (step a length)."""
+    s, device = scalar_of(x), x.device
+    largest.zero_()
+    wp.launch(largest_component_kernel, dim=len(d), inputs=[d], outputs=[largest], device=device)
+    for sign, forces in ((1.0, plus), (-1.0, minus)):
+        wp.launch(probe_kernel, dim=len(x), inputs=[x, d, largest, s(sign * step)], outputs=[probe], device=device)
+        evaluate(probe, forces)
+    wp.launch(directional_difference_kernel, dim=len(x), inputs=[plus, minus, largest, s(step)], outputs=[out],
+              device=device)  # fmt: skip
+
+
+def eval_weighted_dot(a: wp.array, b: wp.array, weight: float, slot: int, total: wp.array) -> None:
+    """total[slot] += weight a · b."""
+    wp.launch(weighted_dot_kernel, dim=len(a), inputs=[a, b, wp.float64(weight), int(slot)], outputs=[total],
+              device=a.device)  # fmt: skip
+
+
+def eval_overdamped_velocity_adjoint(x_hat, inverse_mass, inverse_drag: float, dt: float, v_hat, w_hat, force_hat):
+    """ŵ = v̂ + dt x̂, F̂ = ŵ / (ζ M), v̂ = 0."""
+    s = scalar_of(inverse_mass)
+    wp.launch(overdamped_velocity_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, inverse_mass, s(inverse_drag), s(dt)],
+              outputs=[v_hat, w_hat, force_hat], device=x_hat.device)  # fmt: skip
+
+
+def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None:
+    """p̂, û of the explicit ground law at the limit points, and its parameters' gradient[0..3] (k, β, μ, k_f)."""
+    s = scalar_of(p_hat)
+    wp.launch(ground_adjoint_kernel, dim=len(p), inputs=[p, u, force_hat, s(ground.stiffness), s(ground.damping),
+                                                         s(ground.friction), s(ground.sharpness)],
+              outputs=[p_hat, u_hat, gradient], device=p.device)  # fmt: skip

@@ -1,0 +1,182 @@
+"""Reverse mode through a walker's walk (wavewarp/adjoint.py): the adjoint against central differences of whole
+walks from the same start, the checkpointed pass against the fully stored one, the start state's gradient, and the
+refusals."""
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import warp as wp
+
+from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, walker_adjoint_gradient
+from wavewarp.cli import main
+from wavewarp.parameters import load_scene, resolve
+from wavewarp.walker import WalkerRun
+from wavewarp.walker_gradients import WalkerGradientError
+
+# the paper's walker model (overdamped, explicit point contact, k_f = 0.1) with the insensitive wave, on the
+# level-1 sphere briefly settled, in float64; AC = 0.3 for a walk large against the differences' round-off
+PAPER_WALK = ["level=1", "settle=2", "frames=1", "dtype=float64", "mechanics=overdamped", "contact_solve=explicit",
+              "sharpness=0.1", "sensitive=false", "drag=60", "AC=0.3"]  # fmt: skip
+SPHERE = load_scene("sphere-walker")
+
+
+def parameters(*overrides):
+    return resolve(SPHERE.Parameters, {}, [*PAPER_WALK, *overrides])
+
+
+def settled(p) -> WalkerRun:
+    mesh, options = SPHERE.recipe(p, report=lambda message: None)
+    return WalkerRun("walker", mesh, p, report=lambda message: None, **options)
+
+
+def walk_state(run) -> list:
+    return run.wave.state.arrays() + [run.dynamics.state.x, run.dynamics.state.v]
+
+
+def put(run, state) -> None:
+    """Set `run` to a copy of the state `state` (its wave's and mechanics' arrays) and the reference to its c."""
+    for live, saved in zip(walk_state(run), state):
+        wp.copy(live, saved)
+    run.shell.update_reference(run.wave.c)
+
+
+@pytest.fixture(scope="module")
+def half_period():
+    """The settled walker, its start state and its number of chemistry steps over half a period."""
+    run = settled(parameters("periods=0.5"))
+    return run, [wp.clone(a) for a in walk_state(run)], run.frames * run.steps_per_frame
+
+
+def difference_from_start(p, start, steps, name, relative) -> float:
+    """(J(θ + δ) - J(θ - δ)) / 2δ of whole walks built at θ ± δ, each set to the same start."""
+    theta = float(getattr(p, name))
+    delta = relative * (abs(theta) or 1.0)
+    ends = []
+    for sign in (1.0, -1.0):
+        run = settled(replace(p, **{name: theta + sign * delta}))
+        put(run, start)
+        ends.append(WalkAdjoint(run).walk(steps))
+    return (ends[0] - ends[1]) / (2.0 * delta)
+
+
+def test_the_forward_walk_replays_the_runs_coupled_steps_bitwise(half_period):
+    run, start, steps = half_period
+    put(run, start)
+    WalkAdjoint(run).walk(7)
+    walked = run.dynamics.state.x.numpy().copy()
+    put(run, start)
+    run.coupled.advance(7)
+    assert np.array_equal(run.dynamics.state.x.numpy(), walked)
+
+
+@pytest.mark.parametrize("name", ["AC", "friction"])
+def test_the_adjoint_matches_central_differences_of_walks_from_the_same_start(half_period, name):
+    run, start, steps = half_period
+    put(run, start)
+    adjoint = WalkAdjoint(run, [name]).gradient(steps)["gradient"][name]
+    difference = difference_from_start(run.p, start, steps, name, 1e-3)
+    assert adjoint == pytest.approx(difference, rel=1e-5)
+
+
+def test_the_start_states_gradient_matches_central_differences_along_a_random_direction(half_period):
+    run, start, steps = half_period
+    put(run, start)
+    result = WalkAdjoint(run).gradient(steps)
+    direction = np.random.default_rng(3).standard_normal((run.mesh.n_vertices, 3))
+    step = 1e-5 * run.radius
+    ends = []
+    for sign in (1.0, -1.0):
+        put(run, start)
+        run.dynamics.state.x.assign(start[-2].numpy() + sign * step * direction)
+        ends.append(WalkAdjoint(run).walk(steps))
+    assert np.sum(result["start"]["x"] * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)
+
+
+def test_the_checkpointed_gradient_equals_the_fully_stored_one_bitwise(half_period):
+    run, start, steps = half_period
+    results = []
+    for every in (steps, 4):
+        put(run, start)
+        results.append(WalkAdjoint(run, ["AC", "young", "friction", "drag"], checkpoint_every=every).gradient(steps))
+    stored, checkpointed = results
+    assert stored["checkpoints"] == 1 and checkpointed["checkpoints"] == math.ceil(steps / 4)
+    assert stored["gradient"] == checkpointed["gradient"]
+    for name in ("x", "v"):
+        assert np.array_equal(stored["start"][name], checkpointed["start"][name])
+    assert stored["objective"] == checkpointed["objective"]
+
+
+def test_the_default_checkpoints_hold_of_order_the_square_root_of_the_steps(half_period):
+    run, start, steps = half_period
+    put(run, start)
+    result = WalkAdjoint(run, ["AC"]).gradient(steps)
+    every = math.ceil(math.sqrt(steps))
+    assert result["checkpoint_every"] == every and result["checkpoints"] == math.ceil(steps / every)
+    assert result["stored_substeps"] == every * run.coupled.substeps + 1
+    left = run.dynamics.state.x.numpy().copy()
+    put(run, start)
+    WalkAdjoint(run).walk(steps)
+    assert np.array_equal(left, run.dynamics.state.x.numpy())  # the gradient leaves the run at the walk's end
+
+
+@pytest.mark.parametrize("overrides, wrt, message", [
+    (["sensitive=true"], ["AC"], "sensitive=false"), (["mechanics=inertial"], ["AC"], "mechanics=overdamped"),
+    (["contact_solve=implicit", "sharpness=inf"], ["AC"], "contact_solve=explicit"),
+    (["contact=area"], ["AC"], "contact=point"), ([], ["density"], "density"),
+    (["drag=0"], ["contact_damping"], "--set drag="), (["mu_v=0"], ["mu_v"], "mu_v > 0")])  # fmt: skip
+def test_walks_the_reverse_mode_does_not_cover_are_refused_with_the_fix(overrides, wrt, message):
+    with pytest.raises(WalkerGradientError, match=message):
+        check_adjoint_walk(parameters(*overrides), wrt)
+
+
+def test_parameters_the_settling_sees_need_the_held_start():
+    with pytest.raises(WalkerGradientError, match="--hold-start"):
+        walker_adjoint_gradient(SPHERE, parameters(), ["AC", "young"])
+
+
+def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points(capsys):
+    sets = [arg for item in [*PAPER_WALK, "periods=0.2"] for arg in ("--set", item)]
+    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC,AI", "--json", "--device", "cpu", *sets]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert set(result["gradient"]) == {"AC", "AI"} and result["method"] == "adjoint" and not result["start_held"]
+    assert all(math.isfinite(value) for value in result["gradient"].values())
+    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", *sets]) != 0
+    assert "--points" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_every_parameters_adjoint_matches_central_differences_of_whole_walks():
+    """One period, every parameter the reverse mode takes, against walks built at θ ± δ from the same start."""
+    p = parameters("periods=1")
+    run = settled(p)
+    start, steps = [wp.clone(a) for a in walk_state(run)], run.frames * run.steps_per_frame
+    names = ["AC", "AI", "thickness", "young", "mu_v", "friction", "sharpness", "stiffness", "contact_damping", "drag"]
+    adjoint = WalkAdjoint(run, names).gradient(steps)["gradient"]
+    for name in names:
+        assert adjoint[name] == pytest.approx(difference_from_start(p, start, steps, name, 1e-3), rel=1e-5), name
+
+
+@pytest.mark.slow
+def test_the_adjoint_through_the_whole_run_matches_differences_of_whole_runs():
+    """AC and AI (the settling does not see them): `walker_adjoint_gradient` against central differences of whole runs
+    (each settled anew with the unperturbed run's mechanics steps), and its J against the plain run's."""
+    p = parameters("periods=0.5")
+    adjoint = walker_adjoint_gradient(SPHERE, p, ["AC", "AI"], device="cpu", report=lambda message: None)
+    base = settled(p)
+    plain = base.dynamics.center_of_mass() @ base.forward
+    base.coupled.advance(base.frames * base.steps_per_frame)
+    assert adjoint["objective"] == pytest.approx((base.dynamics.center_of_mass() @ base.forward - plain) / base.radius,
+                                                 rel=1e-12)  # fmt: skip
+    for name in ("AC", "AI"):
+        theta = float(getattr(p, name))
+        delta = 1e-3 * (abs(theta) or 1.0)
+        ends = []
+        for sign in (1.0, -1.0):
+            mesh, options = SPHERE.recipe(p, report=lambda message: None)
+            run = WalkerRun("walker", mesh, replace(p, **{name: theta + sign * delta}), mechanics_dt=base.settle_dt,
+                            report=lambda message: None, **options)  # fmt: skip
+            ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
+        assert adjoint["gradient"][name] == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-5), name

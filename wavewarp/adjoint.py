@@ -1,0 +1,320 @@
+"""Reverse mode through a walker's walk, with checkpoints (docs/theory/gradients.md, "Reverse mode").
+
+The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the explicit point contact with a
+smooth friction law (k_f finite: the paper's), the Koiter shell, the insensitive wave (the chemistry does not see
+the shape: c(t) is data for the mechanics), one world, float64. The objective is the walk's J, the centre of mass's
+displacement along the wave in R from the walk's start to its end. One pass back gives dJ/dθ for every parameter of
+`ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
+
+Per mechanics substep, backwards: ŵ = v̂' + dt x̂', F̂ = ŵ/(ζM); the shell's x̂ += (∂F/∂x)ᵀF̂ = -H F̂ (H symmetric:
+the central difference of the forces along F̂); the ground's law at the limit points is differentiated by hand
+(kernels/adjoint.py) and reaches x̂, v̂ through Lᵀ; the parameters: Y scales F, h scales the stretching once and the
+bending thrice, μV the volume term, AC and AI by central differences of F̂ · F. The rigid-body correction of the
+forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque of F vanish at every x.
+
+Checkpoints: the coupled state every K chemistry steps (K ≈ √N, N the steps), each stretch of K steps run again
+from its checkpoint, storing its substeps' (x, v), and then taken backwards: O(√N) states, one extra forward run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import warp as wp
+
+from . import kernels
+from .coupled import GRAPH_SUBSTEPS
+from .device import run_steps
+from .kernels.adjoint import (
+    eval_count,
+    eval_directional_derivative,
+    eval_ground_adjoint,
+    eval_overdamped_velocity_adjoint,
+    eval_pull,
+    eval_push,
+    eval_weighted_dot,
+)
+from .kernels.contact import ground_motion, spread_to_control_points
+from .kernels.dynamics import eval_reference_ramp
+from .shell import KoiterReference
+from .walker_gradients import WalkerGradientError
+
+SHELL_PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v")
+GROUND_PARAMETERS = ("stiffness", "contact_damping", "friction", "sharpness")  # the order of kernels/adjoint.py's slots
+ADJOINT_PARAMETERS = SHELL_PARAMETERS + GROUND_PARAMETERS + ("drag",)
+SETTLE_FREE = ("AC", "AI")  # the walk's start (settled at c = 0) does not depend on them
+ACTION_STEP = 1e-4  # the Hessian action's central difference, in mean edges along the direction's largest component (1e-5: round-off)
+MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
+           kernels.reduce, kernels.adjoint)  # what a walk and its adjoint launch (loaded before a capture)
+COUPLING_STEP = 1e-5  # AC, AI: relative central differences of F̂ · F (absolute where the coupling is 0)
+
+
+def check_adjoint_walk(p, wrt) -> None:
+    """Raise WalkerGradientError, naming the fix, where the reverse mode does not cover a walker of parameters `p`
+    or the parameters `wrt`."""
+    unknown = [name for name in wrt if name not in ADJOINT_PARAMETERS]
+    if unknown:
+        raise WalkerGradientError(f"--wrt {','.join(unknown) or '(nothing)'}: the reverse mode differentiates "
+                                  f"{', '.join(ADJOINT_PARAMETERS)} (central differences take the rest: --method "
+                                  "differences)")  # fmt: skip
+    needs = [(p.sensitive, "sensitive=false (the wave on the rest shell: the chemistry's adjoint is not built)"),
+             (p.mechanics != "overdamped", "mechanics=overdamped"),
+             (p.contact_solve != "explicit", "contact_solve=explicit and a finite sharpness (e.g. the paper's 0.1)"),
+             (p.contact != "point", "contact=point")]  # fmt: skip
+    missing = [fix for needed, fix in needs if needed]
+    if missing:
+        raise WalkerGradientError("the reverse mode covers the overdamped walk on the explicit point contact with the "
+                                  f"insensitive wave; set {'; '.join(missing)}, or take central differences "
+                                  "(--method differences)")  # fmt: skip
+    if "contact_damping" in wrt and p.drag == 0:
+        raise WalkerGradientError("drag = 0 (automatic) follows the contact damping β (2 η_ground): give the drag a "
+                                  "value (--set drag=...) to differentiate β")  # fmt: skip
+    if "mu_v" in wrt and p.mu_v == 0:
+        raise WalkerGradientError("mu_v = 0: the model has no volume term to differentiate; give mu_v > 0")
+
+
+def check_adjoint_shell(shell) -> None:
+    """Raise WalkerGradientError where the reverse mode does not cover `shell` (its model, dtype, worlds)."""
+    needs = [(shell.model != "koiter", "the Koiter shell (not the bilayer)"), (shell.scalar != wp.float64, "dtype=float64"),
+             (shell.worlds != 1, "one world")]  # fmt: skip
+    missing = [fix for needed, fix in needs if needed]
+    if missing:
+        raise WalkerGradientError(f"the reverse mode needs {'; '.join(missing)} (--method differences takes the rest)")
+
+
+class WalkAdjoint:
+    """dJ/dθ and dJ/d(x₀, v₀) of a `WalkerRun`'s walk from its current state (module docstring). `wrt`: names of
+    `ADJOINT_PARAMETERS`; `checkpoint_every`: chemistry steps between checkpoints (None: ⌈√N⌉)."""
+
+    def __init__(self, run, wrt=(), checkpoint_every=None):
+        check_adjoint_walk(run.p, wrt)
+        check_adjoint_shell(run.shell)
+        self.run, self.wrt = run, list(wrt)
+        self.checkpoint_every = checkpoint_every
+        self.wave, self.dynamics, self.shell = run.wave, run.dynamics, run.shell
+        self.solver, self.coupled = run.dynamics.solver, run.coupled
+        shell, n = self.shell, run.mesh.n_vertices
+        forward = np.asarray(run.forward, dtype=np.float64)
+        seed = np.outer(self.dynamics.mass / (self.dynamics.total_mass * run.radius), forward)
+        with wp.ScopedDevice(shell.device):
+            self._seed = wp.array(seed, dtype=shell.vec3)
+            self._scratch = {name: wp.zeros(n, dtype=shell.vec3) for name in
+                             ("x_hat", "v_hat", "w_hat", "force_hat", "probe", "plus", "minus", "forces", "term",
+                              "p", "u", "a", "unused", "p_hat", "u_hat", "x", "v", "v_next")}  # fmt: skip
+            self._counters = {"step": wp.zeros(1, dtype=wp.int32), "substep": wp.zeros(1, dtype=wp.int32)}
+            self._c_start, self._c_end = wp.empty_like(self.wave.c), wp.empty_like(self.wave.c)
+            self._largest = wp.zeros(1, dtype=wp.float64)
+            self._shell_gradient = wp.zeros(len(SHELL_PARAMETERS) + 1, dtype=wp.float64)  # + drag
+            self._ground_gradient = wp.zeros(len(GROUND_PARAMETERS), dtype=wp.float64)
+            self._c_ramp = wp.empty_like(self.wave.c)
+            self._unit = shell.world_arrays(np.ones(1))[0]
+            self._zero = shell.world_arrays(np.zeros(1))[0]
+            self._unit_penalty = wp.ones(1, dtype=wp.float64)
+            self._zero_penalty = wp.zeros(1, dtype=wp.float64)
+        self.capture = run.dynamics.capture and run.wave.capture
+        self._graphs = {"forward": {}, "recompute": {}, "backward": {}}
+        self._xs = self._vs = self._cs = None  # the stretch's stored rows, allocated by `gradient`
+        self._couplings = {}
+        for index, name in enumerate(("AC", "AI")):
+            if name in self.wrt:
+                theta = float(getattr(run.p, name))
+                delta = COUPLING_STEP * (abs(theta) or 1.0)
+                pair = []
+                for sign in (1.0, -1.0):
+                    values = [shell.AC, shell.AI]
+                    values[index] = theta + sign * delta
+                    pair.append(KoiterReference(shell.world_arrays(*values)))
+                self._couplings[name] = (pair, delta)
+
+    # ---------------------------------------------------------------- the forward walk
+    def _state_arrays(self) -> list:
+        return self.wave.state.arrays() + [self.dynamics.state.x, self.dynamics.state.v]
+
+    def _set_reference(self, k: int) -> None:
+        """The active reference before substep k (1…S) of the chemistry step from c_start to c_end (`Walking._step`)."""
+        if self.coupled.ramp:
+            eval_reference_ramp(self._c_start, self._c_end, k / self.coupled.substeps, self._c_ramp)
+            self.shell.update_reference(self._c_ramp)
+        else:
+            self.shell.update_reference(self._c_end)
+
+    def _coupled_step(self, store: bool = False) -> None:
+        """One chemistry step and its mechanics substeps as `Walking._step` takes them (the insensitive wave). `store`:
+        c before the step and (x, v) before each substep pushed at the device's counters (the stretch's rows)."""
+        wave, d, counters = self.wave, self.dynamics, self._counters
+        wp.copy(self._c_start, wave.c)
+        if store:
+            eval_push(wave.c, counters["step"], self._cs)
+            eval_count(counters["step"], 1)
+        wave.solver.step(wave.state, wave.state, wave.dt)
+        wp.copy(self._c_end, wave.c)
+        for k in range(1, self.coupled.substeps + 1):
+            if store:
+                self._push_mechanics()
+            self._set_reference(k)
+            d.solver.step(d.state, d.state, d.dt)
+
+    def _push_mechanics(self) -> None:
+        counter = self._counters["substep"]
+        eval_push(self.dynamics.state.x, counter, self._xs)
+        eval_push(self.dynamics.state.v, counter, self._vs)
+        eval_count(counter, 1)
+
+    def _run(self, step, steps: int, kind: str) -> None:
+        """`steps` calls of `step` as captured graphs (CUDA, or Warp's CPU graph) of at most GRAPH_SUBSTEPS substeps."""
+        run_steps(step, steps, device=self.shell.device, graphs=self._graphs[kind], modules=MODULES,
+                  capture=self.capture, graph_steps=max(1, GRAPH_SUBSTEPS // self.coupled.substeps))  # fmt: skip
+
+    def centre(self) -> float:
+        """The centre of mass along the wave, in R."""
+        return float(self.dynamics.center_of_mass() @ self.run.forward) / self.run.radius
+
+    def walk(self, steps: int) -> float:
+        """Advance the run `steps` chemistry steps as its own coupled steps do; returns J (the distance walked, in R)."""
+        start = self.centre()
+        self._run(self._coupled_step, int(steps), "forward")
+        self._advance_clocks(steps)
+        return self.centre() - start
+
+    def _advance_clocks(self, steps: int) -> None:
+        wave, d = self.wave, self.dynamics
+        wave.steps += steps
+        wave.time += steps * wave.dt
+        d.steps += steps * self.coupled.substeps
+        d.time += steps * self.coupled.substeps * d.dt
+
+    # ---------------------------------------------------------------- the gradient
+    def gradient(self, steps: int) -> dict:
+        """Walk `steps` chemistry steps from the current state (leaving the run at the end), then back: {"objective":
+        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy), "steps", "substeps",
+        "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the checkpoints'
+        and the stored stretch's bytes)}."""
+        steps = int(steps)
+        if steps < 1:
+            raise WalkerGradientError(f"steps {steps}: the walk needs at least one chemistry step")
+        every = self.checkpoint_every or math.ceil(math.sqrt(steps))
+        if every < 1:
+            raise WalkerGradientError(f"checkpoint_every {every}: give at least 1 chemistry step")
+        every = min(int(every), steps)
+        substeps, n = self.coupled.substeps, self.run.mesh.n_vertices
+        with wp.ScopedDevice(self.shell.device):
+            checkpoints = [wp.empty((math.ceil(steps / every),) + a.shape, dtype=a.dtype) for a in self._state_arrays()]
+            self._xs = wp.empty((every * substeps + 1, n), dtype=self.shell.vec3)
+            self._vs = wp.empty_like(self._xs)
+            self._cs = wp.empty((every + 1, n), dtype=self.shell.scalar)
+        start = self.centre()
+        for index, first in enumerate(range(0, steps, every)):
+            for store, live in zip(checkpoints, self._state_arrays()):
+                wp.copy(store[index], live)
+            self._run(self._coupled_step, min(every, steps - first), "forward")
+        objective = self.centre() - start
+        end = [wp.clone(a) for a in self._state_arrays()]
+        s = self._scratch
+        wp.copy(s["x_hat"], self._seed)
+        s["v_hat"].zero_()
+        self._shell_gradient.zero_()
+        self._ground_gradient.zero_()
+        for index in reversed(range(len(checkpoints[0]))):
+            self._backward_stretch([store[index] for store in checkpoints], min(every, steps - index * every))
+        for live, saved in zip(self._state_arrays(), end):  # the run is left at the walk's end
+            wp.copy(live, saved)
+        self.shell.update_reference(self.wave.c)
+        self._advance_clocks(steps)
+        x_hat = s["x_hat"].numpy().astype(np.float64) - self._seed.numpy()
+        state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + self._cs.capacity
+        return {"objective": objective, "gradient": self._named_gradient(),
+                "start": {"x": x_hat, "v": s["v_hat"].numpy().astype(np.float64)}, "steps": steps,
+                "substeps": substeps, "checkpoint_every": every, "checkpoints": len(checkpoints[0]),
+                "stored_substeps": len(self._xs), "state_bytes": int(state_bytes)}  # fmt: skip
+
+    def _backward_stretch(self, checkpoint: list, count: int) -> None:
+        """Run `count` chemistry steps again from `checkpoint`, storing c and every substep's (x, v), then take them
+        backwards (the device's counters walk the stored rows down)."""
+        for live, saved in zip(self._state_arrays(), checkpoint):
+            wp.copy(live, saved)
+        for counter in self._counters.values():
+            counter.zero_()
+        self._run(lambda: self._coupled_step(store=True), count, "recompute")
+        eval_push(self.wave.c, self._counters["step"], self._cs)
+        self._push_mechanics()  # the stretch's end: the rows count·S of (x, v) and count of c
+        eval_count(self._counters["substep"], -1)
+        self._run(self._backward_step, count, "backward")
+
+    def _backward_step(self) -> None:
+        """One chemistry step backwards: its substeps' adjoints, last first, the references ramped as they were."""
+        counters, s = self._counters, self._scratch
+        eval_count(counters["step"], -1)
+        eval_pull(self._cs, counters["step"], 0, self._c_start)
+        eval_pull(self._cs, counters["step"], 1, self._c_end)
+        for k in reversed(range(1, self.coupled.substeps + 1)):
+            eval_count(counters["substep"], -1)
+            eval_pull(self._xs, counters["substep"], 0, s["x"])
+            eval_pull(self._vs, counters["substep"], 0, s["v"])
+            eval_pull(self._vs, counters["substep"], 1, s["v_next"])
+            self._set_reference(k)
+            self._substep_adjoint(s["x"], s["v"], s["v_next"])
+
+    def _substep_adjoint(self, x, v, v_next) -> None:
+        """x̂, v̂ (after the substep) → before it, and the parameters' gradients (module docstring)."""
+        s, solver, shell, p = self._scratch, self.solver, self.shell, self.run.p
+        eval_overdamped_velocity_adjoint(s["x_hat"], solver.inverse_mass, 1.0 / solver.drag, self.dynamics.dt,
+                                         s["v_hat"], s["w_hat"], s["force_hat"])  # fmt: skip
+        force_hat, gradient = s["force_hat"], self._shell_gradient
+        if "drag" in self.wrt:
+            eval_weighted_dot(s["w_hat"], v_next, -1.0 / solver.drag, len(SHELL_PARAMETERS), gradient)
+        eval_directional_derivative(x, force_hat, ACTION_STEP * shell.edge_length, shell.forces_device, self._largest,
+                                    s["probe"], s["plus"], s["minus"], s["x_hat"])  # fmt: skip
+        if "young" in self.wrt or "thickness" in self.wrt:
+            shell.forces_device(x, s["forces"])
+            for name, theta in (("young", p.young), ("thickness", p.thickness)):
+                if name in self.wrt:
+                    eval_weighted_dot(force_hat, s["forces"], 1.0 / theta, SHELL_PARAMETERS.index(name), gradient)
+        if "thickness" in self.wrt:  # the bending modulus Y h³/(24(1 - ν²)) once more, twice: 2b/h F_b
+            bending = shell.moduli[1]
+            shell.term_forces_device(x, s["term"], self._zero, self._unit, self._zero_penalty)
+            eval_weighted_dot(force_hat, s["term"], 2.0 * bending / p.thickness, SHELL_PARAMETERS.index("thickness"),
+                              gradient)  # fmt: skip
+        if "mu_v" in self.wrt:  # the penalty μV Y h / size⁴ is linear in μV
+            shell.term_forces_device(x, s["term"], self._zero, self._zero, self._unit_penalty)
+            eval_weighted_dot(force_hat, s["term"], shell.volume_penalty / p.mu_v, SHELL_PARAMETERS.index("mu_v"),
+                              gradient)  # fmt: skip
+        for name, (pair, delta) in self._couplings.items():
+            for sign, reference in zip((1.0, -1.0), pair):
+                reference.launch(shell, shell.reference_c)
+                shell.forces_device(x, s["forces"])
+                eval_weighted_dot(force_hat, s["forces"], sign / (2.0 * delta), SHELL_PARAMETERS.index(name), gradient)
+            shell.reference.launch(shell, shell.reference_c)
+        ground = solver.ground
+        ground_motion(ground, x, v, solver.mask, None, s["p"], s["u"])
+        ground_motion(ground, force_hat, force_hat, solver.mask, None, s["a"], s["unused"])
+        eval_ground_adjoint(ground, s["p"], s["u"], s["a"], s["p_hat"], s["u_hat"], self._ground_gradient)
+        spread_to_control_points(ground, s["p_hat"], solver.mask, None, None, s["x_hat"])
+        spread_to_control_points(ground, s["u_hat"], solver.mask, None, None, s["v_hat"])
+
+    def _named_gradient(self) -> dict:
+        shell = self._shell_gradient.numpy()
+        ground = self._ground_gradient.numpy()
+        values = {**dict(zip(SHELL_PARAMETERS, shell)), "drag": shell[-1], **dict(zip(GROUND_PARAMETERS, ground))}
+        return {name: float(values[name]) for name in self.wrt}
+
+
+def walker_adjoint_gradient(scene, p, wrt, *, hold_start: bool = False, seed: int = 0, checkpoint_every=None,
+                            device=None, report=print) -> dict:  # fmt: skip
+    """dJ/dθ of a walker `scene` (a scene module: its `build`) at parameters `p` by the reverse mode (float64), J the
+    distance walked in R over the whole run. Without `hold_start` only `SETTLE_FREE` parameters, whose derivative
+    through the whole run this is (the settling, at c = 0, does not see them); with it any of
+    `ADJOINT_PARAMETERS`, the walk's derivative with its settled start held. Returns `WalkAdjoint.gradient`'s dict
+    with "start_held" and "period_kinetic"."""
+    check_adjoint_walk(p, wrt)
+    if not len(wrt):
+        raise WalkerGradientError(f"--wrt (nothing): name one or more of {', '.join(ADJOINT_PARAMETERS)}")
+    moved = [name for name in wrt if name not in SETTLE_FREE]
+    if moved and not hold_start:
+        raise WalkerGradientError(f"--wrt {','.join(moved)}: the walk's settled start depends on them and the reverse "
+                                  "mode does not go through the settling; --hold-start gives the walk's derivative "
+                                  "from the settled start, --method differences the whole run's")  # fmt: skip
+    run = scene.build(replace(p, dtype="float64"), device=device, seed=seed, report=report)
+    result = WalkAdjoint(run, wrt, checkpoint_every).gradient(run.frames * run.steps_per_frame)
+    return {**result, "start_held": bool(hold_start), "period_kinetic": run.period_kinetic}
