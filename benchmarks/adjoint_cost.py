@@ -1,7 +1,8 @@
 """What the reverse mode costs (issue 31): the wall time of `WalkAdjoint.gradient` against the plain walk it
 differentiates, and the states it holds, against the horizon N (chemistry steps), with checkpoints every ⌈√N⌉ steps
 and with every substep stored (one stretch), on one settled walker (float64, the paper's walker model: overdamped,
-explicit point contact, k_f = 0.1, the insensitive wave).
+explicit point contact, k_f = 0.1, the insensitive wave); and at the longest horizon the gradient through the
+whole run (back through the settling too) against the settling's replay plus the walk.
 
     wavewarp bench adjoint_cost --device cuda --periods 0.25 0.5 1 2 --out benchmarks/results
     wavewarp bench adjoint_cost --device cpu --set level=1 --periods 0.25 0.5 1
@@ -75,9 +76,25 @@ def measure(args, device) -> dict:
               f"{row['checkpointed']['state_bytes'] / 2**20:.3g} MiB); stored {row['stored']['seconds']:.3g} s "
               f"({row['stored']['ratio']:.2f}×, {row['stored']['state_bytes'] / 2**20:.3g} MiB)", flush=True)
         rows.append(row)
+    whole = whole_run(run, args.wrt, rows[-1], from_start, device)
     substeps, n = run.coupled.substeps, run.mesh.n_vertices
     return {"scene": module.NAME, "set": [*PAPER_WALK, *args.set], "wrt": list(args.wrt), "vertices": n,
-            "substeps": substeps, "rows": rows, "memory_exponents": memory_exponents(rows)}  # fmt: skip
+            "substeps": substeps, "rows": rows, "memory_exponents": memory_exponents(rows), "whole_run": whole}  # fmt: skip
+
+
+def whole_run(run, wrt, row: dict, from_start, device) -> dict:
+    """The longest horizon back through the settling too, against the settling's replay plus the walk."""
+    adjoint = WalkAdjoint(run, wrt)
+    for _ in range(2):
+        settle_seconds, _ = timed(adjoint.replay_settling, device)
+    for _ in range(2):
+        from_start()
+        seconds, result = timed(lambda: adjoint.gradient(row["steps"], settle=True), device)
+    forward = settle_seconds + row["forward_seconds"]
+    print(f"whole run (settling {run.settle_steps} steps + N = {row['steps']}): forward {forward:.3g} s, gradient "
+          f"{seconds:.3g} s ({seconds / forward:.2f}×)", flush=True)
+    return {"steps": row["steps"], "settle_steps": list(run.settle_steps), "settle_seconds": settle_seconds,
+            "forward_seconds": forward, "seconds": seconds, "ratio": seconds / forward, "gradient": result["gradient"]}
 
 
 def memory_exponents(rows) -> dict:

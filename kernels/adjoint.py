@@ -58,6 +58,63 @@ def overdamped_velocity_adjoint_kernel(
     v_hat[i] = type(w)()
 
 
+@wp.kernel
+def symplectic_velocity_adjoint_kernel(
+    x_hat: wp.array(dtype=Any), v_hat: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), dt: Any,
+    w_hat: wp.array(dtype=Any), force_hat: wp.array(dtype=Any),
+):  # fmt: skip
+    """Adjoint of symplectic Euler's v' = v + dt a, x' = x + dt v': ŵ = v̂' + dt x̂' (the new velocity's), F̂ = dt ŵ / M
+    (the damping's share of v̂ and x̂ follows, `damping_adjoint_kernel`)."""
+    i = wp.tid()
+    w = v_hat[i] + dt * x_hat[i]
+    w_hat[i] = w
+    force_hat[i] = (dt * inverse_mass[i]) * w
+
+
+@wp.kernel
+def damping_sums_kernel(w_hat: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.vec3d), mass: wp.array(dtype=wp.float64),
+                        rigid: wp.array(dtype=wp.vec3d), sums: wp.array(dtype=wp.vec3d),
+                        second_moment: wp.array(dtype=wp.mat33d)):  # fmt: skip
+    """One world: sums[0] += Σ ŵ_i, sums[1] += Σ r_i × ŵ_i, second_moment[0] += Σ M_i r_i r_iᵀ (r = x - c, c = rigid[2])."""
+    i = wp.tid()
+    r = x[i] - rigid[2]
+    wp.atomic_add(sums, 0, w_hat[i])
+    wp.atomic_add(sums, 1, wp.cross(r, w_hat[i]))
+    wp.atomic_add(second_moment, 0, mass[i] * wp.outer(r, r))
+
+
+@wp.kernel
+def damping_solve_kernel(sums: wp.array(dtype=wp.vec3d), second_moment: wp.array(dtype=wp.mat33d)):
+    """sums[2] = T = I⁻¹ Σ r × ŵ, I = tr(S) 1 - S the inertia about the centre (one thread)."""
+    S = second_moment[0]
+    sums[2] = wp.inverse(wp.trace(S) * wp.identity(n=3, dtype=wp.float64) - S) * sums[1]
+
+
+@wp.kernel
+def damping_adjoint_kernel(
+    w_hat: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.vec3d), v: wp.array(dtype=wp.vec3d),
+    mass: wp.array(dtype=wp.float64), rigid: wp.array(dtype=wp.vec3d), sums: wp.array(dtype=wp.vec3d),
+    total_mass: wp.float64, rate: wp.float64, x_hat: wp.array(dtype=wp.vec3d), v_hat: wp.array(dtype=wp.vec3d),
+):  # fmt: skip
+    """Adjoint of the damping dt η (v_rigid(x, v) - v) in v' (rate = dt η; one world): v_rigid_i = v̄ + Ω × r_i with
+    v̄ = ΣMv/ΣM, Ω = I⁻¹ Σ M r × v, r = x - c. With A = Σŵ, T = I⁻¹ Σ r × ŵ (`damping_solve_kernel`), P = ΣM v̄:
+    v̂_j = ŵ_j (1 - rate) + rate M_j (A/ΣM + T × r_j) and x̂_j += rate [ŵ_j × Ω - (M_j/ΣM) A × Ω + M_j v_j × T
+    - (M_j/ΣM) P × T + M_j ((r_j·Ω) T + (T·r_j) Ω - 2 (T·Ω) r_j)] (docs/theory/gradients.md, "Reverse mode")."""
+    j = wp.tid()
+    w = w_hat[j]
+    r = x[j] - rigid[2]
+    omega = rigid[4]
+    A = sums[0]
+    T = sums[2]
+    m = mass[j]
+    share = m / total_mass
+    momentum = total_mass * rigid[3]
+    v_hat[j] = (wp.float64(1.0) - rate) * w + rate * m * (A / total_mass + wp.cross(T, r))
+    inertia = m * (wp.dot(r, omega) * T + wp.dot(T, r) * omega - wp.float64(2.0) * wp.dot(T, omega) * r)
+    x_hat[j] = x_hat[j] + rate * (wp.cross(w, omega) - share * wp.cross(A, omega) + m * wp.cross(v[j], T)
+                                  - share * wp.cross(momentum, T) + inertia)  # fmt: skip
+
+
 @wp.func
 def friction_factor(speed: Any, k_f: Any):
     """(φ, φ'/s) of φ(s) = tanh(k_f s)/s, by its series where k_f s is small (φ → k_f, φ'/s → -2k_f³/3)."""
@@ -148,6 +205,8 @@ declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", 
 declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
 declare_overloads(overdamped_velocity_adjoint_kernel, x_hat="vec3[]", inverse_mass="scalar[]", inverse_drag="scalar",
                   dt="scalar", v_hat="vec3[]", w_hat="vec3[]", force_hat="vec3[]")  # fmt: skip
+declare_overloads(symplectic_velocity_adjoint_kernel, x_hat="vec3[]", v_hat="vec3[]", inverse_mass="scalar[]", dt="scalar",
+                  w_hat="vec3[]", force_hat="vec3[]")  # fmt: skip
 declare_overloads(ground_adjoint_kernel, p="vec3[]", u="vec3[]", force_hat="vec3[]", k="scalar", beta="scalar",
                   mu="scalar", k_f="scalar", p_hat="vec3[]", u_hat="vec3[]")  # fmt: skip
 
@@ -196,6 +255,27 @@ def eval_overdamped_velocity_adjoint(x_hat, inverse_mass, inverse_drag: float, d
     s = scalar_of(inverse_mass)
     wp.launch(overdamped_velocity_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, inverse_mass, s(inverse_drag), s(dt)],
               outputs=[v_hat, w_hat, force_hat], device=x_hat.device)  # fmt: skip
+
+
+def eval_symplectic_velocity_adjoint(x_hat, v_hat, inverse_mass, dt: float, w_hat, force_hat) -> None:
+    """ŵ = v̂ + dt x̂, F̂ = dt ŵ / M."""
+    wp.launch(symplectic_velocity_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, v_hat, inverse_mass,
+                                                                          scalar_of(inverse_mass)(dt)],
+              outputs=[w_hat, force_hat], device=x_hat.device)  # fmt: skip
+
+
+def eval_damping_adjoint(w_hat, x, v, mass, rigid, total_mass: float, rate: float, sums, second_moment, x_hat,
+                         v_hat) -> None:  # fmt: skip
+    """v̂ and x̂ of the damping toward the rigid-body motion (`damping_adjoint_kernel`); `rigid` the rows of x, v
+    (kernels/dynamics.py), `sums` (3 vec3) and `second_moment` (1 mat33) scratch."""
+    device = x.device
+    sums.zero_()
+    second_moment.zero_()
+    wp.launch(damping_sums_kernel, dim=len(x), inputs=[w_hat, x, mass, rigid], outputs=[sums, second_moment],
+              device=device)  # fmt: skip
+    wp.launch(damping_solve_kernel, dim=1, inputs=[sums, second_moment], device=device)
+    wp.launch(damping_adjoint_kernel, dim=len(x), inputs=[w_hat, x, v, mass, rigid, sums, wp.float64(total_mass),
+                                                          wp.float64(rate)], outputs=[x_hat, v_hat], device=device)
 
 
 def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, walker_adjoint_gradient
+from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
 from wavewarp.cli import main
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.walker import WalkerRun
@@ -109,17 +109,29 @@ def test_the_checkpointed_gradient_equals_the_fully_stored_one_bitwise(half_peri
     assert stored["objective"] == checkpointed["objective"]
 
 
-def test_the_default_checkpoints_hold_of_order_the_square_root_of_the_steps(half_period):
+def test_the_default_checkpoints_hold_the_fewest_bytes_and_leave_the_run_at_the_walks_end(half_period):
     run, start, steps = half_period
     put(run, start)
     result = WalkAdjoint(run, ["AC"]).gradient(steps)
-    every = math.ceil(math.sqrt(steps))
-    assert result["checkpoint_every"] == every and result["checkpoints"] == math.ceil(steps / every)
-    assert result["stored_substeps"] == every * run.coupled.substeps + 1
+    every, substeps = result["checkpoint_every"], run.coupled.substeps
+    assert result["checkpoints"] == math.ceil(steps / every) and result["stored_substeps"] == every * substeps + 1
+    state = sum(a.capacity for a in walk_state(run))
+    row, c_row = 2 * run.dynamics.state.x.capacity, run.wave.c.capacity
+    held = [math.ceil(steps / k) * state + (k * substeps + 1) * row + (k + 1) * c_row for k in range(1, steps + 1)]
+    assert result["state_bytes"] == min(held)
     left = run.dynamics.state.x.numpy().copy()
     put(run, start)
     WalkAdjoint(run).walk(steps)
     assert np.array_equal(left, run.dynamics.state.x.numpy())  # the gradient leaves the run at the walk's end
+
+
+@pytest.mark.parametrize("substeps", [1, 4, 200])
+def test_the_checkpoints_bytes_grow_as_the_square_root_of_the_steps(substeps):
+    held = []
+    for steps in (100, 10000):
+        every = checkpoint_spacing(steps, substeps, 80, 48, 8)
+        held.append(math.ceil(steps / every) * 80 + (every * substeps + 1) * 48 + (every + 1) * 8)
+    assert held[1] / held[0] == pytest.approx(10.0, rel=0.15)  # 100× the steps, 10× the bytes
 
 
 @pytest.mark.parametrize("overrides, wrt, message", [
@@ -132,9 +144,30 @@ def test_walks_the_reverse_mode_does_not_cover_are_refused_with_the_fix(override
         check_adjoint_walk(parameters(*overrides), wrt)
 
 
-def test_parameters_the_settling_sees_need_the_held_start():
-    with pytest.raises(WalkerGradientError, match="--hold-start"):
-        walker_adjoint_gradient(SPHERE, parameters(), ["AC", "young"])
+def test_the_settlings_replay_from_the_placement_ends_at_the_walks_start_bitwise(half_period):
+    run, start, steps = half_period
+    assert np.array_equal(WalkAdjoint(run).replay_settling(), start[-2].numpy())
+
+
+def whole_run_difference(p, base, name, relative) -> float:
+    """(J(θ + δ) - J(θ - δ)) / 2δ of whole runs (placed, settled with `base`'s mechanics steps, walked) at θ ± δ."""
+    theta = float(getattr(p, name))
+    delta = relative * (abs(theta) or 1.0)
+    ends = []
+    for sign in (1.0, -1.0):
+        mesh, options = SPHERE.recipe(p, report=lambda message: None)
+        run = WalkerRun("walker", mesh, replace(p, **{name: theta + sign * delta}), mechanics_dt=base.settle_dt,
+                        report=lambda message: None, **options)  # fmt: skip
+        ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
+    return (ends[0] - ends[1]) / (2.0 * delta)
+
+
+@pytest.mark.parametrize("name", ["stiffness", "thickness"])
+def test_the_adjoint_through_the_settling_matches_central_differences_of_whole_runs(half_period, name):
+    run, start, steps = half_period
+    put(run, start)
+    adjoint = WalkAdjoint(run, [name]).gradient(steps, settle=True)["gradient"][name]
+    assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, 1e-3), rel=1e-5)
 
 
 def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points(capsys):
@@ -160,23 +193,27 @@ def test_every_parameters_adjoint_matches_central_differences_of_whole_walks():
 
 
 @pytest.mark.slow
-def test_the_adjoint_through_the_whole_run_matches_differences_of_whole_runs():
-    """AC and AI (the settling does not see them): `walker_adjoint_gradient` against central differences of whole runs
-    (each settled anew with the unperturbed run's mechanics steps), and its J against the plain run's."""
+def test_every_parameters_adjoint_through_the_whole_run_matches_differences_of_whole_runs():
+    """`walker_adjoint_gradient` (back through the walk and the settling) against central differences of whole runs
+    (each placed and settled anew with the unperturbed run's mechanics steps), and its J against the plain run's."""
     p = parameters("periods=0.5")
-    adjoint = walker_adjoint_gradient(SPHERE, p, ["AC", "AI"], device="cpu", report=lambda message: None)
+    names = ["AC", "AI", "thickness", "young", "mu_v", "friction", "sharpness", "stiffness", "contact_damping", "drag"]
+    adjoint = walker_adjoint_gradient(SPHERE, p, names, device="cpu", report=lambda message: None)
     base = settled(p)
     plain = base.dynamics.center_of_mass() @ base.forward
     base.coupled.advance(base.frames * base.steps_per_frame)
     assert adjoint["objective"] == pytest.approx((base.dynamics.center_of_mass() @ base.forward - plain) / base.radius,
                                                  rel=1e-12)  # fmt: skip
-    for name in ("AC", "AI"):
-        theta = float(getattr(p, name))
-        delta = 1e-3 * (abs(theta) or 1.0)
-        ends = []
-        for sign in (1.0, -1.0):
-            mesh, options = SPHERE.recipe(p, report=lambda message: None)
-            run = WalkerRun("walker", mesh, replace(p, **{name: theta + sign * delta}), mechanics_dt=base.settle_dt,
-                            report=lambda message: None, **options)  # fmt: skip
-            ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
-        assert adjoint["gradient"][name] == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-5), name
+    for name in names:
+        assert adjoint["gradient"][name] == pytest.approx(whole_run_difference(p, base, name, 1e-3), rel=1e-5), name
+
+
+def test_one_adjoint_taken_twice_gives_the_same_gradient_through_its_captured_graphs(half_period):
+    run, start, steps = half_period
+    adjoint = WalkAdjoint(run, ["thickness", "friction"])
+    results = []
+    for horizon, settle in ((steps, True), (steps // 2, False), (steps, True)):
+        put(run, start)
+        results.append(adjoint.gradient(horizon, settle=settle))
+    assert results[0]["gradient"] == results[2]["gradient"] != results[1]["gradient"]
+    assert np.array_equal(results[0]["start"]["x"], results[2]["start"]["x"])

@@ -12,8 +12,9 @@ the central difference of the forces along F̂); the ground's law at the limit p
 bending thrice, μV the volume term, AC and AI by central differences of F̂ · F. The rigid-body correction of the
 forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque of F vanish at every x.
 
-Checkpoints: the coupled state every K chemistry steps (K ≈ √N, N the steps), each stretch of K steps run again
-from its checkpoint, storing its substeps' (x, v), and then taken backwards: O(√N) states, one extra forward run.
+Checkpoints: the coupled state every K chemistry steps (K of order √N, N the steps, chosen for the fewest bytes), each
+stretch of K steps run again from its checkpoint, storing its substeps' (x, v), and then taken backwards: O(√N)
+states, one extra forward run.
 """
 
 from __future__ import annotations
@@ -27,13 +28,17 @@ import warp as wp
 from . import kernels
 from .coupled import GRAPH_SUBSTEPS
 from .device import run_steps
+from .dynamics import InertialSolver
+from .geometry import limit_positions
 from .kernels.adjoint import (
     eval_count,
+    eval_damping_adjoint,
     eval_directional_derivative,
     eval_ground_adjoint,
     eval_overdamped_velocity_adjoint,
     eval_pull,
     eval_push,
+    eval_symplectic_velocity_adjoint,
     eval_weighted_dot,
 )
 from .kernels.contact import ground_motion, spread_to_control_points
@@ -84,9 +89,20 @@ def check_adjoint_shell(shell) -> None:
         raise WalkerGradientError(f"the reverse mode needs {'; '.join(missing)} (--method differences takes the rest)")
 
 
+def checkpoint_spacing(steps: int, substeps: int, checkpoint_bytes: int, row_bytes: int, step_bytes: int) -> int:
+    """The chemistry steps K between checkpoints that hold the fewest bytes over N = `steps`: ⌈N/K⌉ checkpoints of
+    `checkpoint_bytes` and a stretch of K·S + 1 stored substeps of `row_bytes` ((x, v)) and K + 1 steps of
+    `step_bytes` (c). K is of order √(N · checkpoint / (S · row)), the bytes of order √N."""
+
+    def held(every):
+        return math.ceil(steps / every) * checkpoint_bytes + (every * substeps + 1) * row_bytes + (every + 1) * step_bytes
+
+    return min(range(1, steps + 1), key=held)
+
+
 class WalkAdjoint:
     """dJ/dθ and dJ/d(x₀, v₀) of a `WalkerRun`'s walk from its current state (module docstring). `wrt`: names of
-    `ADJOINT_PARAMETERS`; `checkpoint_every`: chemistry steps between checkpoints (None: ⌈√N⌉)."""
+    `ADJOINT_PARAMETERS`; `checkpoint_every`: chemistry steps between checkpoints (None: `checkpoint_spacing`'s)."""
 
     def __init__(self, run, wrt=(), checkpoint_every=None):
         check_adjoint_walk(run.p, wrt)
@@ -113,8 +129,13 @@ class WalkAdjoint:
             self._zero = shell.world_arrays(np.zeros(1))[0]
             self._unit_penalty = wp.ones(1, dtype=wp.float64)
             self._zero_penalty = wp.zeros(1, dtype=wp.float64)
+            self._mass = wp.array(self.dynamics.mass, dtype=wp.float64)
+            self._damping_sums = wp.zeros(3, dtype=wp.vec3d)
+            self._damping_moment = wp.zeros(1, dtype=wp.mat33d)
         self.capture = run.dynamics.capture and run.wave.capture
-        self._graphs = {"forward": {}, "recompute": {}, "backward": {}}
+        self._graphs = {}
+        self._placement = np.zeros(len(GROUND_PARAMETERS))  # the stiffness's share through the placement depth
+        self._settling = None  # the settling's inertial solver and replay state, made on first use
         self._xs = self._vs = self._cs = None  # the stretch's stored rows, allocated by `gradient`
         self._couplings = {}
         for index, name in enumerate(("AC", "AI")):
@@ -162,10 +183,22 @@ class WalkAdjoint:
         eval_push(self.dynamics.state.v, counter, self._vs)
         eval_count(counter, 1)
 
-    def _run(self, step, steps: int, kind: str) -> None:
-        """`steps` calls of `step` as captured graphs (CUDA, or Warp's CPU graph) of at most GRAPH_SUBSTEPS substeps."""
-        run_steps(step, steps, device=self.shell.device, graphs=self._graphs[kind], modules=MODULES,
-                  capture=self.capture, graph_steps=max(1, GRAPH_SUBSTEPS // self.coupled.substeps))  # fmt: skip
+    def _run(self, step, steps: int, kind, substeps=None) -> None:
+        """`steps` calls of `step` as captured graphs (CUDA, or Warp's CPU graph) of at most GRAPH_SUBSTEPS substeps
+        (`substeps` a call; default the walk's)."""
+        run_steps(step, steps, device=self.shell.device, graphs=self._graphs.setdefault(kind, {}), modules=MODULES,
+                  capture=self.capture, graph_steps=max(1, GRAPH_SUBSTEPS // (substeps or self.coupled.substeps)))
+
+    def _ensure_rows(self, rows: int, steps: int = 0) -> None:
+        """Room for `rows` stored (x, v) and `steps` + 1 stored c; the captured graphs, which hold the old rows, are
+        dropped when they grow."""
+        if self._xs is None or len(self._xs) < rows or len(self._cs) < steps + 1:
+            rows, steps = max(rows, 0 if self._xs is None else len(self._xs)), max(steps, 0 if self._cs is None else len(self._cs) - 1)
+            with wp.ScopedDevice(self.shell.device):
+                self._xs = wp.empty((rows, self.run.mesh.n_vertices), dtype=self.shell.vec3)
+                self._vs = wp.empty_like(self._xs)
+                self._cs = wp.empty((steps + 1, self.run.mesh.n_vertices), dtype=self.shell.scalar)
+            self._graphs.clear()
 
     def centre(self) -> float:
         """The centre of mass along the wave, in R."""
@@ -186,24 +219,26 @@ class WalkAdjoint:
         d.time += steps * self.coupled.substeps * d.dt
 
     # ---------------------------------------------------------------- the gradient
-    def gradient(self, steps: int) -> dict:
+    def gradient(self, steps: int, settle: bool = False) -> dict:
         """Walk `steps` chemistry steps from the current state (leaving the run at the end), then back: {"objective":
-        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy), "steps", "substeps",
-        "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the checkpoints'
-        and the stored stretch's bytes)}."""
+        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy, at the walk's start), "steps",
+        "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the
+        walk's checkpoints and the stored stretch)}. `settle`: the current state is the run's settled start, and the
+        gradient goes on back through the settling (replayed from the placement) to the whole run's."""
         steps = int(steps)
         if steps < 1:
             raise WalkerGradientError(f"steps {steps}: the walk needs at least one chemistry step")
-        every = self.checkpoint_every or math.ceil(math.sqrt(steps))
+        every = self.checkpoint_every or checkpoint_spacing(
+            steps, self.coupled.substeps, sum(a.capacity for a in self._state_arrays()),
+            2 * self.dynamics.state.x.capacity, self.wave.c.capacity)
         if every < 1:
             raise WalkerGradientError(f"checkpoint_every {every}: give at least 1 chemistry step")
         every = min(int(every), steps)
-        substeps, n = self.coupled.substeps, self.run.mesh.n_vertices
+        substeps = self.coupled.substeps
         with wp.ScopedDevice(self.shell.device):
             checkpoints = [wp.empty((math.ceil(steps / every),) + a.shape, dtype=a.dtype) for a in self._state_arrays()]
-            self._xs = wp.empty((every * substeps + 1, n), dtype=self.shell.vec3)
-            self._vs = wp.empty_like(self._xs)
-            self._cs = wp.empty((every + 1, n), dtype=self.shell.scalar)
+        self._ensure_rows(every * substeps + 1, every)
+        self._placement = np.zeros(len(GROUND_PARAMETERS))
         start = self.centre()
         for index, first in enumerate(range(0, steps, every)):
             for store, live in zip(checkpoints, self._state_arrays()):
@@ -223,9 +258,13 @@ class WalkAdjoint:
         self.shell.update_reference(self.wave.c)
         self._advance_clocks(steps)
         x_hat = s["x_hat"].numpy().astype(np.float64) - self._seed.numpy()
+        start_gradient = {"x": x_hat, "v": s["v_hat"].numpy().astype(np.float64)}
+        if settle:
+            s["x_hat"].assign(x_hat)
+            self._settle_adjoint()
         state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + self._cs.capacity
         return {"objective": objective, "gradient": self._named_gradient(),
-                "start": {"x": x_hat, "v": s["v_hat"].numpy().astype(np.float64)}, "steps": steps,
+                "start": start_gradient, "steps": steps,
                 "substeps": substeps, "checkpoint_every": every, "checkpoints": len(checkpoints[0]),
                 "stored_substeps": len(self._xs), "state_bytes": int(state_bytes)}  # fmt: skip
 
@@ -257,13 +296,30 @@ class WalkAdjoint:
             self._substep_adjoint(s["x"], s["v"], s["v_next"])
 
     def _substep_adjoint(self, x, v, v_next) -> None:
-        """x̂, v̂ (after the substep) → before it, and the parameters' gradients (module docstring)."""
-        s, solver, shell, p = self._scratch, self.solver, self.shell, self.run.p
-        eval_overdamped_velocity_adjoint(s["x_hat"], solver.inverse_mass, 1.0 / solver.drag, self.dynamics.dt,
-                                         s["v_hat"], s["w_hat"], s["force_hat"])  # fmt: skip
-        force_hat, gradient = s["force_hat"], self._shell_gradient
+        """x̂, v̂ (after a walk's substep) → before it, and the parameters' gradients (module docstring)."""
+        self._overdamped_adjoint(x, v_next, self.dynamics.dt)
+        self._force_adjoint(x, v, couplings=True)
+
+    def _overdamped_adjoint(self, x, v_next, dt: float) -> None:
+        """The overdamped update's adjoint: F̂ from x̂', v̂' (v̂ = 0 before the ground's share), the drag's gradient."""
+        s, solver = self._scratch, self.solver
+        eval_overdamped_velocity_adjoint(s["x_hat"], solver.inverse_mass, 1.0 / solver.drag, dt, s["v_hat"], s["w_hat"],
+                                         s["force_hat"])  # fmt: skip
         if "drag" in self.wrt:
-            eval_weighted_dot(s["w_hat"], v_next, -1.0 / solver.drag, len(SHELL_PARAMETERS), gradient)
+            eval_weighted_dot(s["w_hat"], v_next, -1.0 / solver.drag, len(SHELL_PARAMETERS), self._shell_gradient)
+
+    def _inertial_adjoint(self, solver, x, v, dt: float) -> None:
+        """Symplectic Euler's adjoint with the damping toward the rigid-body motion: F̂, v̂ and x̂'s share from it."""
+        s = self._scratch
+        eval_symplectic_velocity_adjoint(s["x_hat"], s["v_hat"], solver.inverse_mass, dt, s["w_hat"], s["force_hat"])
+        eval_damping_adjoint(s["w_hat"], x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass,
+                             dt * solver.damping, self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
+
+    def _force_adjoint(self, x, v, couplings: bool) -> None:
+        """F̂ (the step's force adjoint) back to x̂, v̂ through the shell (-H F̂) and the ground (Lᵀ of its law's
+        adjoint), and to the parameters; `couplings`: AC and AI too (not while settling, at c = 0)."""
+        s, solver, shell, p = self._scratch, self.solver, self.shell, self.run.p
+        force_hat, gradient = s["force_hat"], self._shell_gradient
         eval_directional_derivative(x, force_hat, ACTION_STEP * shell.edge_length, shell.forces_device, self._largest,
                                     s["probe"], s["plus"], s["minus"], s["x_hat"])  # fmt: skip
         if "young" in self.wrt or "thickness" in self.wrt:
@@ -272,15 +328,14 @@ class WalkAdjoint:
                 if name in self.wrt:
                     eval_weighted_dot(force_hat, s["forces"], 1.0 / theta, SHELL_PARAMETERS.index(name), gradient)
         if "thickness" in self.wrt:  # the bending modulus Y h³/(24(1 - ν²)) once more, twice: 2b/h F_b
-            bending = shell.moduli[1]
             shell.term_forces_device(x, s["term"], self._zero, self._unit, self._zero_penalty)
-            eval_weighted_dot(force_hat, s["term"], 2.0 * bending / p.thickness, SHELL_PARAMETERS.index("thickness"),
-                              gradient)  # fmt: skip
+            eval_weighted_dot(force_hat, s["term"], 2.0 * shell.moduli[1] / p.thickness,
+                              SHELL_PARAMETERS.index("thickness"), gradient)  # fmt: skip
         if "mu_v" in self.wrt:  # the penalty μV Y h / size⁴ is linear in μV
             shell.term_forces_device(x, s["term"], self._zero, self._zero, self._unit_penalty)
             eval_weighted_dot(force_hat, s["term"], shell.volume_penalty / p.mu_v, SHELL_PARAMETERS.index("mu_v"),
                               gradient)  # fmt: skip
-        for name, (pair, delta) in self._couplings.items():
+        for name, (pair, delta) in self._couplings.items() if couplings else ():
             for sign, reference in zip((1.0, -1.0), pair):
                 reference.launch(shell, shell.reference_c)
                 shell.forces_device(x, s["forces"])
@@ -293,9 +348,106 @@ class WalkAdjoint:
         spread_to_control_points(ground, s["p_hat"], solver.mask, None, None, s["x_hat"])
         spread_to_control_points(ground, s["u_hat"], solver.mask, None, None, s["v_hat"])
 
+    # ---------------------------------------------------------------- the settling
+    def _settle_phases(self) -> list:
+        """[(solver, dt, steps)] of the run's settling as `settled_walker_dynamics` took it: inertial (damping η), then
+        overdamped, each from rest (v = 0), at c = 0; the inertial solver and the replay's state made once (the captured
+        graphs hold their arrays)."""
+        run = self.run
+        if self._settling is None:
+            inertial = InertialSolver(self.shell, density=run.model.density, gravity=run.model.gravity,
+                                      ground=self.solver.ground, damping=run.p.damping)  # fmt: skip
+            self._settling = (inertial, inertial.state(run.mesh.vertices))
+        return list(zip((self._settling[0], self.solver), run.settle_dt, run.settle_steps))
+
+    def replay_settling(self) -> np.ndarray:
+        """The run's settling replayed from the placement (the adjoint's forward pass through it, on its own state);
+        returns the settled positions (V × 3 NumPy), the walk's start. Leaves the shell's reference at the wave's c."""
+        self.shell.update_reference(wp.zeros_like(self.wave.c))
+        phases, state = self._settle_phases(), self._settling[1]
+        state.x.assign(self.run.mesh.vertices)
+        for solver, dt, steps in phases:
+            state.v.zero_()
+            self._mechanics_forward(solver, dt, steps, state)
+        self.shell.update_reference(self.wave.c)
+        return state.x.numpy().astype(np.float64)
+
+    def _settle_adjoint(self) -> None:
+        """x̂, v̂ at the walk's start → the placement, through the settling's two phases (checkpointed as the walk),
+        and the placement's depth into the stiffness's gradient."""
+        shell, s = self.shell, self._scratch
+        shell.update_reference(wp.zeros_like(self.wave.c))
+        phases = self._settle_phases()
+        state = self._settling[1]
+        state.x.assign(self.run.mesh.vertices)  # the placement
+        starts = []
+        for solver, dt, steps in phases:  # forward: each phase's checkpoints, each phase from rest
+            state.v.zero_()
+            starts.append(self._mechanics_forward(solver, dt, steps, state))
+        for (solver, dt, steps), (checkpoints, every) in reversed(list(zip(phases, starts))):
+            for index in reversed(range(len(checkpoints[0]))):
+                self._mechanics_backward(solver, dt, min(every, steps - index * every), state,
+                                         [store[index] for store in checkpoints])  # fmt: skip
+            s["v_hat"].zero_()
+        if "stiffness" in self.wrt:
+            self._placement = self._placement_stiffness()
+        shell.update_reference(self.wave.c)
+
+    def _mechanics_forward(self, solver, dt: float, steps: int, state) -> list:
+        """`steps` mechanics steps of `solver` on `state` from where it is; returns the (x, v) checkpoints and their
+        spacing, ⌈√steps⌉ steps."""
+        every = max(1, math.ceil(math.sqrt(steps)))
+        with wp.ScopedDevice(self.shell.device):
+            checkpoints = [wp.empty((math.ceil(steps / every),) + a.shape, dtype=a.dtype) for a in (state.x, state.v)]
+        self._ensure_rows(every + 1)
+        for index, first in enumerate(range(0, steps, every)):
+            wp.copy(checkpoints[0][index], state.x)
+            wp.copy(checkpoints[1][index], state.v)
+            self._run(lambda: solver.step(state, state, dt), min(every, steps - first), ("settle", id(solver)), 1)
+        return checkpoints, every
+
+    def _mechanics_backward(self, solver, dt: float, count: int, state, checkpoint: list) -> None:
+        """`count` steps of `solver` again from `checkpoint`, stored, then backwards."""
+        wp.copy(state.x, checkpoint[0])
+        wp.copy(state.v, checkpoint[1])
+        counter, s = self._counters["substep"], self._scratch
+        counter.zero_()
+
+        def recompute():
+            eval_push(state.x, counter, self._xs)
+            eval_push(state.v, counter, self._vs)
+            eval_count(counter, 1)
+            solver.step(state, state, dt)
+
+        def backward():
+            eval_count(counter, -1)
+            eval_pull(self._xs, counter, 0, s["x"])
+            eval_pull(self._vs, counter, 0, s["v"])
+            eval_pull(self._vs, counter, 1, s["v_next"])
+            if solver is self.solver:
+                self._overdamped_adjoint(s["x"], s["v_next"], dt)
+            else:
+                self._inertial_adjoint(solver, s["x"], s["v"], dt)
+            self._force_adjoint(s["x"], s["v"], couplings=False)
+
+        self._run(recompute, count, ("settle recompute", id(solver)), 1)
+        eval_push(state.x, counter, self._xs)
+        eval_push(state.v, counter, self._vs)
+        self._run(backward, count, ("settle backward", id(solver)), 1)
+
+    def _placement_stiffness(self) -> np.ndarray:
+        """The ground gradient's share of the placement: the walker starts lowered by the depth d at which k Σ pen² bears
+        its weight (`ground_lift`), ∂z/∂k = Σ pen² / (2k Σ pen), pen the limit points' depths below z = 0."""
+        depths = np.maximum(-limit_positions(self.run.mesh, device="cpu", dtype="float64")[:, 2], 0.0)
+        k = self.solver.ground.stiffness
+        lowering = np.sum(depths**2) / (2.0 * k * np.sum(depths)) if np.sum(depths) > 0 else 0.0
+        share = np.zeros(len(GROUND_PARAMETERS))
+        share[GROUND_PARAMETERS.index("stiffness")] = lowering * float(np.sum(self._scratch["x_hat"].numpy()[:, 2]))
+        return share
+
     def _named_gradient(self) -> dict:
         shell = self._shell_gradient.numpy()
-        ground = self._ground_gradient.numpy()
+        ground = self._ground_gradient.numpy() + self._placement
         values = {**dict(zip(SHELL_PARAMETERS, shell)), "drag": shell[-1], **dict(zip(GROUND_PARAMETERS, ground))}
         return {name: float(values[name]) for name in self.wrt}
 
@@ -303,18 +455,14 @@ class WalkAdjoint:
 def walker_adjoint_gradient(scene, p, wrt, *, hold_start: bool = False, seed: int = 0, checkpoint_every=None,
                             device=None, report=print) -> dict:  # fmt: skip
     """dJ/dθ of a walker `scene` (a scene module: its `build`) at parameters `p` by the reverse mode (float64), J the
-    distance walked in R over the whole run. Without `hold_start` only `SETTLE_FREE` parameters, whose derivative
-    through the whole run this is (the settling, at c = 0, does not see them); with it any of
-    `ADJOINT_PARAMETERS`, the walk's derivative with its settled start held. Returns `WalkAdjoint.gradient`'s dict
-    with "start_held" and "period_kinetic"."""
+    distance walked in R over the whole run: back through the walk and then the settling, replayed from the
+    placement (not needed for `SETTLE_FREE` parameters alone: the settling, at c = 0, does not see them).
+    `hold_start`: the walk's derivative with its settled start held. Returns `WalkAdjoint.gradient`'s dict with
+    "start_held" and "period_kinetic"."""
     check_adjoint_walk(p, wrt)
     if not len(wrt):
         raise WalkerGradientError(f"--wrt (nothing): name one or more of {', '.join(ADJOINT_PARAMETERS)}")
-    moved = [name for name in wrt if name not in SETTLE_FREE]
-    if moved and not hold_start:
-        raise WalkerGradientError(f"--wrt {','.join(moved)}: the walk's settled start depends on them and the reverse "
-                                  "mode does not go through the settling; --hold-start gives the walk's derivative "
-                                  "from the settled start, --method differences the whole run's")  # fmt: skip
     run = scene.build(replace(p, dtype="float64"), device=device, seed=seed, report=report)
-    result = WalkAdjoint(run, wrt, checkpoint_every).gradient(run.frames * run.steps_per_frame)
+    settle = not hold_start and any(name not in SETTLE_FREE for name in wrt)
+    result = WalkAdjoint(run, wrt, checkpoint_every).gradient(run.frames * run.steps_per_frame, settle=settle)
     return {**result, "start_held": bool(hold_start), "period_kinetic": run.period_kinetic}

@@ -114,7 +114,7 @@ class WalkerBatch(WorldsRun):
         self.model = walker_model(self.mesh, ps, placed[0].ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
         # settle_dt: the step (overdamped: the pair of steps) while settling; a single run given it settles alike
-        self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p, mechanics_dt)
+        self.dynamics, self.settle_dt, _ = settled_walker_dynamics(self.model, p, mechanics_dt)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
         n = self.vertices = self.mesh.vertices_per_world
         self._slices = [slice(w * n, (w + 1) * n) for w in range(self.worlds)]

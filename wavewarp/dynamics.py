@@ -248,6 +248,13 @@ class InertialSolver:
             self.contact_forces(x, v)
             self._integrate(x, v, dt)
 
+    def rigid_motion(self, x: wp.array, v: wp.array) -> wp.array:
+        """The rigid-body rows of x, v (kernels/dynamics.py, per world: [N/ΣM, α, centre, v̄, Ω], the first two of the
+        force buffer as it is): the centre, the mean velocity and the rotation the damping acts relative to."""
+        eval_rigid_correction(self._forces, self._mass, x, v, True, self.worlds, self._reduction_threads,
+                              self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+        return self._rigid
+
     def _response_scale(self, dt: float) -> float:
         """A point's velocity change per unit of M⁻¹ × force over a step: dt (inertia)."""
         return dt

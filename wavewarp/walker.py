@@ -204,11 +204,11 @@ def settled_walker_dynamics(model, p, settle_dt=None):
     ζ / ω_min², and 40 time units at level 4 left less than half the sag (0.56% of R against 1.29%);
     inertial alone, the body's bounce on the ground rings on. `settle_dt`: the step while settling, or
     for an overdamped walker the pair (inertial, overdamped); None: safety × each bound. Returns
-    (dynamics, the step or pair used, as `settle_dt` takes it)."""
+    (dynamics, the step or pair used, as `settle_dt` takes it, and the steps taken with each)."""
     if p.mechanics != "overdamped":
         dynamics = walker_dynamics(model, p, settle_dt)
         dynamics.run_until(p.settle)
-        return dynamics, dynamics.dt
+        return dynamics, dynamics.dt, (dynamics.steps,)
     inertial_dt, overdamped_dt = settle_dt if settle_dt is not None else (None, None)
     settling = walker_dynamics(model, replace(p, mechanics="inertial"), inertial_dt)
     settling.run_until(p.settle)
@@ -216,7 +216,7 @@ def settled_walker_dynamics(model, p, settle_dt=None):
     dynamics.state.set("x", settling.positions())
     dynamics.time, dynamics.steps = settling.time, settling.steps
     dynamics.run_until(2 * p.settle)
-    return dynamics, (settling.dt, dynamics.dt)
+    return dynamics, (settling.dt, dynamics.dt), (settling.steps, dynamics.steps - settling.steps)
 
 
 def bound_over_reference_range(dynamics) -> float:
@@ -252,7 +252,7 @@ class WalkerRun(WaveClock):
         self.origin_vertex, self.forward = placed.origin_vertex, placed.forward
         self.model = walker_model(mesh, [p], placed.ground, size=size, bilayer=bilayer, rule=rule, device=device)
         self.shell = self.model.shell
-        self.dynamics, self.settle_dt = settled_walker_dynamics(self.model, p, mechanics_dt)
+        self.dynamics, self.settle_dt, self.settle_steps = settled_walker_dynamics(self.model, p, mechanics_dt)
         self.period_kinetic = fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
         settled = self.dynamics.positions()
         self.rest_height = float(self.dynamics.mass @ mesh.vertices[:, 2] / self.dynamics.total_mass)  # rigid, in contact
