@@ -6,6 +6,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads, scalar_of
+from .contact import slip_speed as slip_root
 
 
 @wp.kernel
@@ -115,6 +116,29 @@ def damping_adjoint_kernel(
                                   - share * wp.cross(momentum, T) + inertia)  # fmt: skip
 
 
+@wp.kernel
+def scaled_inverse_mass_kernel(w: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), scale: Any,
+                               out: wp.array(dtype=Any)):  # fmt: skip
+    """out = scale w / M (the contact's velocity change, transposed: f̂ = L out)."""
+    i = wp.tid()
+    out[i] = (scale * inverse_mass[i]) * w[i]
+
+
+@wp.kernel
+def step_adjoint_kernel(x_hat: wp.array(dtype=Any), dt: Any, v_hat: wp.array(dtype=Any), w_hat: wp.array(dtype=Any)):
+    """ŵ = v̂' + dt x̂' (the new velocity's adjoint through x' = x + dt v'), v̂ = 0 (filled by what follows)."""
+    i = wp.tid()
+    w_hat[i] = v_hat[i] + dt * x_hat[i]
+    v_hat[i] = type(w_hat[i])()
+
+
+@wp.kernel
+def add_vectors_kernel(part: wp.array(dtype=Any), total: wp.array(dtype=Any)):
+    """total += part."""
+    i = wp.tid()
+    total[i] = total[i] + part[i]
+
+
 @wp.func
 def friction_factor(speed: Any, k_f: Any):
     """(φ, φ'/s) of φ(s) = tanh(k_f s)/s, by its series where k_f s is small (φ → k_f, φ'/s → -2k_f³/3)."""
@@ -199,7 +223,83 @@ def count_kernel(counter: wp.array(dtype=wp.int32), by: int):
     counter[0] = counter[0] + by
 
 
+@wp.kernel
+def implicit_law_adjoint_kernel(
+    p: wp.array(dtype=wp.vec3d), u: wp.array(dtype=wp.vec3d), response: wp.array(dtype=wp.float64),
+    scale: wp.float64, dt: wp.float64, k: wp.float64, beta: wp.float64, mu: wp.float64, k_f: wp.float64,
+    force_hat: wp.array(dtype=wp.vec3d), u_hat: wp.array(dtype=wp.vec3d), p_hat: wp.array(dtype=wp.vec3d),
+    gradient: wp.array(dtype=wp.float64),
+):  # fmt: skip
+    """Adjoint of the implicit ground law at a point (kernels/contact.py `implicit_contact_kernel`, the lab frame):
+    f(z, u; r) with r = scale × response, F_n = max((kz² - β'u_z)/(1 + β'r), 0), β' = β - 2kz dt, friction
+    -|f_t| u_t/|u_t| with |f_t| = min(μF_n, |u_t|/r) (Coulomb, k_f = ∞) or μF_n tanh(k_f s), s + rμF_n tanh(k_f s)
+    = |u_t| (differentiated implicitly). Given f̂: u_hat = û (overwritten), p_hat += (0, 0, ẑ), gradient[0..3] +=
+    ∂/∂(k, β, μ, k_f) and gradient[4] += ∂/∂scale of f̂ · f. One float64 world."""
+    i = wp.tid()
+    a = force_hat[i]
+    z = p[i][2]
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    r = scale * response[i]
+    damping = beta - wp.float64(2.0) * k * z * dt
+    denominator = one + damping * r
+    fn = (k * z * z - damping * u[i][2]) / denominator
+    u_hat[i] = wp.vec3d()
+    if z > zero or fn < zero:
+        return
+    fn_hat = a[2]
+    r_hat = zero
+    v_t = wp.vec3d(u[i][0], u[i][1], zero)
+    speed = wp.length(v_t)
+    u_t_hat = wp.vec3d()
+    if speed > zero and fn > zero:
+        d = v_t / speed
+        cap = mu * fn
+        a_t = wp.vec3d(a[0], a[1], zero)
+        a_slip = r * cap
+        s = zero
+        th = zero
+        magnitude = wp.min(cap, speed / r)
+        if not wp.isinf(k_f):
+            s = wp.min(slip_root(speed, a_slip, k_f), speed)
+            th = wp.tanh(k_f * s)
+            magnitude = cap * th
+        magnitude_hat = -wp.dot(a_t, d)
+        u_t_hat = -(magnitude / speed) * (a_t - wp.dot(a_t, d) * d)
+        cap_hat = zero
+        speed_hat = zero
+        if wp.isinf(k_f):
+            if cap < speed / r:
+                cap_hat = magnitude_hat
+            else:
+                speed_hat = magnitude_hat / r
+                r_hat = -magnitude_hat * speed / (r * r)
+        else:
+            sech2 = one - th * th
+            slope = one + a_slip * k_f * sech2  # ∂/∂s of s + a tanh(k_f s)
+            s_hat = magnitude_hat * cap * k_f * sech2
+            speed_hat = s_hat / slope
+            slip_hat = -s_hat * th / slope  # ∂s/∂a
+            cap_hat = magnitude_hat * th + slip_hat * r
+            r_hat = slip_hat * cap
+            wp.atomic_add(gradient, 3, magnitude_hat * cap * s * sech2 - s_hat * a_slip * s * sech2 / slope)
+        u_t_hat = u_t_hat + speed_hat * d
+        fn_hat = fn_hat + mu * cap_hat
+        wp.atomic_add(gradient, 2, fn * cap_hat)
+    damping_hat = -fn_hat * (u[i][2] + fn * r) / denominator
+    u_hat[i] = u_t_hat + wp.vec3d(zero, zero, -fn_hat * damping / denominator)
+    p_hat[i] = p_hat[i] + wp.vec3d(zero, zero, fn_hat * wp.float64(2.0) * k * z / denominator
+                                  - damping_hat * wp.float64(2.0) * k * dt)  # fmt: skip
+    r_hat = r_hat - fn_hat * fn * damping / denominator
+    wp.atomic_add(gradient, 0, fn_hat * z * z / denominator - damping_hat * wp.float64(2.0) * z * dt)
+    wp.atomic_add(gradient, 1, damping_hat)
+    wp.atomic_add(gradient, 4, r_hat * response[i])
+
+
 declare_overloads(largest_component_kernel, d="vec3[]")
+declare_overloads(step_adjoint_kernel, x_hat="vec3[]", dt="scalar", v_hat="vec3[]", w_hat="vec3[]")
+declare_overloads(add_vectors_kernel, part="vec3[]", total="vec3[]")
+declare_overloads(scaled_inverse_mass_kernel, w="vec3[]", inverse_mass="scalar[]", scale="scalar", out="vec3[]")
 declare_overloads(probe_kernel, x="vec3[]", d="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
@@ -276,6 +376,33 @@ def eval_damping_adjoint(w_hat, x, v, mass, rigid, total_mass: float, rate: floa
     wp.launch(damping_solve_kernel, dim=1, inputs=[sums, second_moment], device=device)
     wp.launch(damping_adjoint_kernel, dim=len(x), inputs=[w_hat, x, v, mass, rigid, sums, wp.float64(total_mass),
                                                           wp.float64(rate)], outputs=[x_hat, v_hat], device=device)
+
+
+def eval_step_adjoint(x_hat, v_hat, dt: float, w_hat) -> None:
+    """ŵ = v̂ + dt x̂, v̂ = 0."""
+    wp.launch(step_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, scalar_of(x_hat)(dt)], outputs=[v_hat, w_hat],
+              device=x_hat.device)  # fmt: skip
+
+
+def eval_add(total, part) -> None:
+    """total += part."""
+    wp.launch(add_vectors_kernel, dim=len(total), inputs=[part], outputs=[total], device=total.device)
+
+
+def eval_scaled_inverse_mass(w, inverse_mass, scale: float, out) -> None:
+    """out = scale w / M."""
+    wp.launch(scaled_inverse_mass_kernel, dim=len(w), inputs=[w, inverse_mass, scalar_of(inverse_mass)(scale)],
+              outputs=[out], device=w.device)  # fmt: skip
+
+
+def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, force_hat, u_hat, p_hat,
+                              gradient) -> None:  # fmt: skip
+    """û (overwritten) and p̂ += ẑ of the implicit ground law at every point given f̂; gradient[0..4] += ∂/∂(k, β, μ,
+    k_f, scale) (`implicit_law_adjoint_kernel`)."""
+    laws = [wp.float64(value) for value in (scale, dt, ground.stiffness, ground.damping, ground.friction,
+                                            ground.sharpness)]  # fmt: skip
+    wp.launch(implicit_law_adjoint_kernel, dim=len(p), inputs=[p, u, response, *laws, force_hat],
+              outputs=[u_hat, p_hat, gradient], device=p.device)  # fmt: skip
 
 
 def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None:

@@ -11,15 +11,18 @@ import pytest
 import warp as wp
 
 from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
+from wavewarp.benchmarks.inverse_design import main as inverse_design
 from wavewarp.cli import main
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.walker import WalkerRun
 from wavewarp.walker_gradients import WalkerGradientError
 
 # the paper's walker model (overdamped, explicit point contact, k_f = 0.1) with the insensitive wave, on the
-# level-1 sphere briefly settled, in float64; AC = 0.3 for a walk large against the differences' round-off
+# level-1 sphere briefly settled, in float64; AC = 0.3 for a walk large against the differences' round-off;
+# COULOMB: the scenes' contact instead (implicit, Coulomb's law)
 PAPER_WALK = ["level=1", "settle=2", "frames=1", "dtype=float64", "mechanics=overdamped", "contact_solve=explicit",
               "sharpness=0.1", "sensitive=false", "drag=60", "AC=0.3"]  # fmt: skip
+COULOMB = ["contact_solve=implicit", "sharpness=inf"]
 SPHERE = load_scene("sphere-walker")
 
 
@@ -136,8 +139,8 @@ def test_the_checkpoints_bytes_grow_as_the_square_root_of_the_steps(substeps):
 
 @pytest.mark.parametrize("overrides, wrt, message", [
     (["sensitive=true"], ["AC"], "sensitive=false"), (["mechanics=inertial"], ["AC"], "mechanics=overdamped"),
-    (["contact_solve=implicit", "sharpness=inf"], ["AC"], "contact_solve=explicit"),
-    (["contact=area"], ["AC"], "contact=point"), ([], ["density"], "density"),
+    (["contact_solve=implicit", "sharpness=inf"], ["sharpness"], "no derivative in k_f"),
+    (["contact_solve=implicit", "drag_frame=body"], ["AC"], "drag_frame=lab"), (["contact=area"], ["AC"], "contact=point"), ([], ["density"], "density"),
     (["drag=0"], ["contact_damping"], "--set drag="), (["mu_v=0"], ["mu_v"], "mu_v > 0")])  # fmt: skip
 def test_walks_the_reverse_mode_does_not_cover_are_refused_with_the_fix(overrides, wrt, message):
     with pytest.raises(WalkerGradientError, match=message):
@@ -160,6 +163,32 @@ def whole_run_difference(p, base, name, relative) -> float:
                         report=lambda message: None, **options)  # fmt: skip
         ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
     return (ends[0] - ends[1]) / (2.0 * delta)
+
+
+@pytest.fixture(scope="module")
+def coulomb_half_period():
+    """The settled walker on the implicit contact with Coulomb's law, its start state and its chemistry steps."""
+    run = settled(parameters("periods=0.5", *COULOMB))
+    return run, [wp.clone(a) for a in walk_state(run)], run.frames * run.steps_per_frame
+
+
+@pytest.mark.parametrize("name", ["friction", "drag"])
+def test_the_adjoint_through_the_implicit_contact_matches_central_differences_of_whole_runs(coulomb_half_period, name):
+    """Coulomb's stick and slip make J piecewise smooth: a step of 1e-3 θ crosses their switches, 1e-4 does not."""
+    run, start, steps = coulomb_half_period
+    put(run, start)
+    adjoint = WalkAdjoint(run, [name]).gradient(steps, settle=True)["gradient"][name]
+    assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, 1e-4), rel=1e-5)
+
+
+def test_the_implicit_contacts_checkpointed_gradient_equals_the_fully_stored_one_bitwise(coulomb_half_period):
+    run, start, steps = coulomb_half_period
+    results = []
+    for every in (steps, 5):
+        put(run, start)
+        results.append(WalkAdjoint(run, ["AC", "friction", "drag"], checkpoint_every=every).gradient(steps, settle=True))
+    assert results[0]["gradient"] == results[1]["gradient"]
+    assert np.array_equal(results[0]["start"]["x"], results[1]["start"]["x"])
 
 
 @pytest.mark.parametrize("name", ["stiffness", "thickness"])
@@ -193,6 +222,18 @@ def test_every_parameters_adjoint_matches_central_differences_of_whole_walks():
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("contact", [COULOMB, ["contact_solve=implicit", "sharpness=10"]], ids=["coulomb", "tanh"])
+def test_every_parameters_adjoint_through_the_implicit_contact_matches_differences_of_whole_runs(contact):
+    p = parameters("periods=0.5", *contact)
+    names = ["AC", "AI", "thickness", "young", "mu_v", "friction", "stiffness", "contact_damping", "drag"]
+    names += [] if contact == COULOMB else ["sharpness"]
+    adjoint = walker_adjoint_gradient(SPHERE, p, names, device="cpu", report=lambda message: None)
+    base = settled(p)
+    for name in names:
+        assert adjoint["gradient"][name] == pytest.approx(whole_run_difference(p, base, name, 1e-4), rel=1e-5), name
+
+
+@pytest.mark.slow
 def test_every_parameters_adjoint_through_the_whole_run_matches_differences_of_whole_runs():
     """`walker_adjoint_gradient` (back through the walk and the settling) against central differences of whole runs
     (each placed and settled anew with the unperturbed run's mechanics steps), and its J against the plain run's."""
@@ -217,3 +258,14 @@ def test_one_adjoint_taken_twice_gives_the_same_gradient_through_its_captured_gr
         results.append(adjoint.gradient(horizon, settle=settle))
     assert results[0]["gradient"] == results[2]["gradient"] != results[1]["gradient"]
     assert np.array_equal(results[0]["start"]["x"], results[2]["start"]["x"])
+
+
+def test_inverse_design_by_the_reverse_mode_raises_the_walk_and_a_plain_run_confirms_it(tmp_path):
+    sets = [arg for item in [*PAPER_WALK, "periods=0.3"] for arg in ("--set", item)]
+    assert inverse_design(["--scene", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "friction", "--iterations",
+                           "3", "--device", "cpu", "--out", str(tmp_path), *sets]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "inverse_design.json").read_text())
+    assert result["method"] == "adjoint" and result["best"]["J"] > result["history"][0]["J"]
+    assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-12)  # the same plain run
+    with pytest.raises(SystemExit):
+        inverse_design(["--method", "adjoint", "--wrt", "AC", "elongation", "--out", str(tmp_path)])

@@ -1,8 +1,9 @@
 """Reverse mode through a walker's walk, with checkpoints (docs/theory/gradients.md, "Reverse mode").
 
-The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the explicit point contact with a
-smooth friction law (k_f finite: the paper's), the Koiter shell, the insensitive wave (the chemistry does not see
-the shape: c(t) is data for the mechanics), one world, float64. The objective is the walk's J, the centre of mass's
+The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the point contact, explicit with a
+smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the scenes' default: its
+adjoint in wavewarp/adjoint_contact.py), the Koiter shell, the insensitive wave (the chemistry does not see the
+shape: c(t) is data for the mechanics), one world, float64. The objective is the walk's J, the centre of mass's
 displacement along the wave in R from the walk's start to its end. One pass back gives dJ/dθ for every parameter of
 `ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
 
@@ -26,6 +27,7 @@ import numpy as np
 import warp as wp
 
 from . import kernels
+from .adjoint_contact import ImplicitContactAdjoint
 from .coupled import GRAPH_SUBSTEPS
 from .device import run_steps
 from .dynamics import InertialSolver
@@ -38,6 +40,8 @@ from .kernels.adjoint import (
     eval_overdamped_velocity_adjoint,
     eval_pull,
     eval_push,
+    eval_scaled_inverse_mass,
+    eval_step_adjoint,
     eval_symplectic_velocity_adjoint,
     eval_weighted_dot,
 )
@@ -65,14 +69,16 @@ def check_adjoint_walk(p, wrt) -> None:
                                   f"{', '.join(ADJOINT_PARAMETERS)} (central differences take the rest: --method "
                                   "differences)")  # fmt: skip
     needs = [(p.sensitive, "sensitive=false (the wave on the rest shell: the chemistry's adjoint is not built)"),
-             (p.mechanics != "overdamped", "mechanics=overdamped"),
-             (p.contact_solve != "explicit", "contact_solve=explicit and a finite sharpness (e.g. the paper's 0.1)"),
-             (p.contact != "point", "contact=point")]  # fmt: skip
+             (p.mechanics != "overdamped", "mechanics=overdamped"), (p.contact != "point", "contact=point"),
+             (p.drag_frame != "lab", "drag_frame=lab")]  # fmt: skip
     missing = [fix for needed, fix in needs if needed]
     if missing:
-        raise WalkerGradientError("the reverse mode covers the overdamped walk on the explicit point contact with the "
+        raise WalkerGradientError("the reverse mode covers the overdamped walk on the point contact with the "
                                   f"insensitive wave; set {'; '.join(missing)}, or take central differences "
                                   "(--method differences)")  # fmt: skip
+    if "sharpness" in wrt and math.isinf(p.sharpness):
+        raise WalkerGradientError("sharpness = inf is Coulomb's law, which has no derivative in k_f: --set "
+                                  "sharpness=1e4 walks as Coulomb does")  # fmt: skip
     if "contact_damping" in wrt and p.drag == 0:
         raise WalkerGradientError("drag = 0 (automatic) follows the contact damping β (2 η_ground): give the drag a "
                                   "value (--set drag=...) to differentiate β")  # fmt: skip
@@ -118,7 +124,8 @@ class WalkAdjoint:
             self._seed = wp.array(seed, dtype=shell.vec3)
             self._scratch = {name: wp.zeros(n, dtype=shell.vec3) for name in
                              ("x_hat", "v_hat", "w_hat", "force_hat", "probe", "plus", "minus", "forces", "term",
-                              "p", "u", "a", "unused", "p_hat", "u_hat", "x", "v", "v_next")}  # fmt: skip
+                              "p", "u", "a", "unused", "p_hat", "u_hat", "x", "v", "v_next", "v_star", "a_ctrl",
+                              "u_star_hat", "v_star_hat")}  # fmt: skip
             self._counters = {"step": wp.zeros(1, dtype=wp.int32), "substep": wp.zeros(1, dtype=wp.int32)}
             self._c_start, self._c_end = wp.empty_like(self.wave.c), wp.empty_like(self.wave.c)
             self._largest = wp.zeros(1, dtype=wp.float64)
@@ -136,6 +143,9 @@ class WalkAdjoint:
         self._graphs = {}
         self._placement = np.zeros(len(GROUND_PARAMETERS))  # the stiffness's share through the placement depth
         self._settling = None  # the settling's inertial solver and replay state, made on first use
+        self._contacts = {}  # solver id -> its implicit contact's adjoint (ImplicitContactAdjoint)
+        if self.solver.implicit:
+            self._contact_of(self.solver)
         self._xs = self._vs = self._cs = None  # the stretch's stored rows, allocated by `gradient`
         self._couplings = {}
         for index, name in enumerate(("AC", "AI")):
@@ -251,6 +261,8 @@ class WalkAdjoint:
         s["v_hat"].zero_()
         self._shell_gradient.zero_()
         self._ground_gradient.zero_()
+        for contact in self._contacts.values():
+            contact.gradient.zero_()
         for index in reversed(range(len(checkpoints[0]))):
             self._backward_stretch([store[index] for store in checkpoints], min(every, steps - index * every))
         for live, saved in zip(self._state_arrays(), end):  # the run is left at the walk's end
@@ -297,8 +309,52 @@ class WalkAdjoint:
 
     def _substep_adjoint(self, x, v, v_next) -> None:
         """x̂, v̂ (after a walk's substep) → before it, and the parameters' gradients (module docstring)."""
-        self._overdamped_adjoint(x, v_next, self.dynamics.dt)
-        self._force_adjoint(x, v, couplings=True)
+        self._step_adjoint(self.solver, x, v, v_next, self.dynamics.dt, couplings=True)
+
+    def _step_adjoint(self, solver, x, v, v_next, dt: float, couplings: bool) -> None:
+        """One step of `solver` (the overdamped walk's, or the settling's inertial one) backwards: x̂, v̂ after it →
+        before it. `couplings`: AC and AI too (not while settling, at c = 0)."""
+        overdamped = solver is self.solver
+        if solver.implicit:
+            self._implicit_adjoint(solver, x, v, dt, overdamped)
+        elif overdamped:
+            self._overdamped_adjoint(x, v_next, dt)
+        else:
+            self._inertial_adjoint(solver, x, v, dt)
+        self._shell_adjoint(x, couplings)
+        if not solver.implicit:
+            self._explicit_ground_adjoint(x, v)
+
+    def _contact_of(self, solver) -> ImplicitContactAdjoint:
+        if id(solver) not in self._contacts:
+            self._contacts[id(solver)] = ImplicitContactAdjoint(solver)
+        return self._contacts[id(solver)]
+
+    def _implicit_adjoint(self, solver, x, v, dt: float, overdamped: bool) -> None:
+        """A step with the implicit contact backwards up to F̂ (docs/theory/gradients.md): the predictor v* and the
+        contact solved again, ŵ = v̂' + dt x̂'; v = v* + scale M⁻¹Lᵀf gives f̂ = scale L M⁻¹ ŵ; the contact's adjoint
+        gives û*, ẑ; v̂* = ŵ + Lᵀû*; then the predictor's adjoint (overdamped: F̂ = v̂*/(ζM); inertial: F̂ = dt v̂*/M
+        and the damping's)."""
+        s, contact = self._scratch, self._contact_of(solver)
+        scale = 1.0 / solver.drag if overdamped else dt
+        solver.predictor(x, v, dt, s["v_star"])
+        contact.forward(x, s["v_star"], scale, dt)
+        eval_step_adjoint(s["x_hat"], s["v_hat"], dt, s["w_hat"])
+        eval_scaled_inverse_mass(s["w_hat"], solver.inverse_mass, scale, s["a_ctrl"])
+        ground_motion(solver.ground, s["a_ctrl"], s["a_ctrl"], solver.mask, None, s["a"], s["unused"])
+        s["p_hat"].zero_()
+        contact.backward(s["a"], scale, dt, s["u_star_hat"], s["p_hat"])
+        wp.copy(s["v_star_hat"], s["w_hat"])
+        spread_to_control_points(solver.ground, s["u_star_hat"], solver.mask, None, None, s["v_star_hat"])
+        spread_to_control_points(solver.ground, s["p_hat"], solver.mask, None, None, s["x_hat"])
+        if overdamped:  # v* = (F/M + g - a_rigid)/ζ; v̂ stays 0: the step does not read v
+            eval_scaled_inverse_mass(s["v_star_hat"], solver.inverse_mass, scale, s["force_hat"])
+            if "drag" in self.wrt:
+                eval_weighted_dot(s["v_star_hat"], s["v_star"], -scale, len(SHELL_PARAMETERS), self._shell_gradient)
+        else:  # v* = v + dt (F/M + g - a_rigid - η (v - v_rigid))
+            eval_scaled_inverse_mass(s["v_star_hat"], solver.inverse_mass, dt, s["force_hat"])
+            eval_damping_adjoint(s["v_star_hat"], x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass,
+                                 dt * solver.damping, self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
 
     def _overdamped_adjoint(self, x, v_next, dt: float) -> None:
         """The overdamped update's adjoint: F̂ from x̂', v̂' (v̂ = 0 before the ground's share), the drag's gradient."""
@@ -315,10 +371,10 @@ class WalkAdjoint:
         eval_damping_adjoint(s["w_hat"], x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass,
                              dt * solver.damping, self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
 
-    def _force_adjoint(self, x, v, couplings: bool) -> None:
-        """F̂ (the step's force adjoint) back to x̂, v̂ through the shell (-H F̂) and the ground (Lᵀ of its law's
-        adjoint), and to the parameters; `couplings`: AC and AI too (not while settling, at c = 0)."""
-        s, solver, shell, p = self._scratch, self.solver, self.shell, self.run.p
+    def _shell_adjoint(self, x, couplings: bool) -> None:
+        """F̂ (the step's force adjoint) back to x̂ through the shell (-H F̂) and to its parameters; `couplings`: AC and
+        AI too."""
+        s, shell, p = self._scratch, self.shell, self.run.p
         force_hat, gradient = s["force_hat"], self._shell_gradient
         eval_directional_derivative(x, force_hat, ACTION_STEP * shell.edge_length, shell.forces_device, self._largest,
                                     s["probe"], s["plus"], s["minus"], s["x_hat"])  # fmt: skip
@@ -341,7 +397,12 @@ class WalkAdjoint:
                 shell.forces_device(x, s["forces"])
                 eval_weighted_dot(force_hat, s["forces"], sign / (2.0 * delta), SHELL_PARAMETERS.index(name), gradient)
             shell.reference.launch(shell, shell.reference_c)
-        ground = solver.ground
+
+    def _explicit_ground_adjoint(self, x, v) -> None:
+        """F̂ back to x̂, v̂ through the explicit ground law at the limit points (Lᵀ of its adjoint), and to its
+        parameters."""
+        s, solver = self._scratch, self.solver
+        force_hat, ground = s["force_hat"], solver.ground
         ground_motion(ground, x, v, solver.mask, None, s["p"], s["u"])
         ground_motion(ground, force_hat, force_hat, solver.mask, None, s["a"], s["unused"])
         eval_ground_adjoint(ground, s["p"], s["u"], s["a"], s["p_hat"], s["u_hat"], self._ground_gradient)
@@ -358,6 +419,8 @@ class WalkAdjoint:
             inertial = InertialSolver(self.shell, density=run.model.density, gravity=run.model.gravity,
                                       ground=self.solver.ground, damping=run.p.damping)  # fmt: skip
             self._settling = (inertial, inertial.state(run.mesh.vertices))
+            if inertial.implicit:
+                self._contact_of(inertial)
         return list(zip((self._settling[0], self.solver), run.settle_dt, run.settle_steps))
 
     def replay_settling(self) -> np.ndarray:
@@ -424,11 +487,7 @@ class WalkAdjoint:
             eval_pull(self._xs, counter, 0, s["x"])
             eval_pull(self._vs, counter, 0, s["v"])
             eval_pull(self._vs, counter, 1, s["v_next"])
-            if solver is self.solver:
-                self._overdamped_adjoint(s["x"], s["v_next"], dt)
-            else:
-                self._inertial_adjoint(solver, s["x"], s["v"], dt)
-            self._force_adjoint(s["x"], s["v"], couplings=False)
+            self._step_adjoint(solver, s["x"], s["v"], s["v_next"], dt, couplings=False)
 
         self._run(recompute, count, ("settle recompute", id(solver)), 1)
         eval_push(state.x, counter, self._xs)
@@ -448,6 +507,10 @@ class WalkAdjoint:
     def _named_gradient(self) -> dict:
         shell = self._shell_gradient.numpy()
         ground = self._ground_gradient.numpy() + self._placement
+        for key, contact in self._contacts.items():  # the implicit contact's laws; its scale 1/ζ in the walk's solver
+            ground = ground + contact.gradient.numpy()[:4]
+            if key == id(self.solver):
+                shell[-1] -= contact.gradient.numpy()[4] / self.solver.drag**2
         values = {**dict(zip(SHELL_PARAMETERS, shell)), "drag": shell[-1], **dict(zip(GROUND_PARAMETERS, ground))}
         return {name: float(values[name]) for name in self.wrt}
 

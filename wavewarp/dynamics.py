@@ -248,6 +248,16 @@ class InertialSolver:
             self.contact_forces(x, v)
             self._integrate(x, v, dt)
 
+    def predictor(self, x: wp.array, v: wp.array, dt: float, out: wp.array) -> None:
+        """out = the velocity an implicit-contact step solves its contact from, at x, v (the shell's forces, the rigid
+        correction and the integrator without contact: `step`'s first half; x, v unchanged)."""
+        wp.copy(out, v)
+        with wp.ScopedDevice(self.device):
+            self.shell.forces_device(x, self._forces)
+            eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self.worlds, self._reduction_threads,
+                                  self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+            self._integrate(x, out, dt, move=False)
+
     def rigid_motion(self, x: wp.array, v: wp.array) -> wp.array:
         """The rigid-body rows of x, v (kernels/dynamics.py, per world: [N/ΣM, α, centre, v̄, Ω], the first two of the
         force buffer as it is): the centre, the mean velocity and the rotation the damping acts relative to."""
