@@ -13,6 +13,10 @@ the central difference of the forces along F̂); the ground's law at the limit p
 bending thrice, μV the volume term, AC and AI by central differences of F̂ · F. The rigid-body correction of the
 forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque of F vanish at every x.
 
+The whole run: back through the settling too, replayed from the placement (its overdamped phase by the same
+adjoint, its inertial phase by symplectic Euler's with the damping toward the rigid-body motion) and the placement's
+depth, which the contact stiffness sets.
+
 Checkpoints: the coupled state every K chemistry steps (K of order √N, N the steps, chosen for the fewest bytes), each
 stretch of K steps run again from its checkpoint, storing its substeps' (x, v), and then taken backwards: O(√N)
 states, one extra forward run.
