@@ -269,3 +269,17 @@ def test_inverse_design_by_the_reverse_mode_raises_the_walk_and_a_plain_run_conf
     assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-12)  # the same plain run
     with pytest.raises(SystemExit):
         inverse_design(["--method", "adjoint", "--wrt", "AC", "elongation", "--out", str(tmp_path)])
+
+
+@pytest.mark.parametrize("fixture", ["half_period", "coulomb_half_period"])
+def test_the_start_gradient_knows_a_horizontal_shift_changes_nothing(fixture, request):
+    """On the flat ground the walk from a start moved sideways is the same walk: Σᵢ ∂J/∂x₀ᵢ has no horizontal part
+    (the vertical one is the ground's); the implicit overdamped step does not read v₀."""
+    run, start, steps = request.getfixturevalue(fixture)
+    put(run, start)
+    gradient = WalkAdjoint(run).gradient(steps)["start"]
+    x = gradient["x"]
+    assert np.abs(x.sum(axis=0)[:2]).max() < 1e-9 * np.abs(x).sum()
+    assert abs(x.sum(axis=0)[2]) > 1e-3 * np.abs(x).sum()
+    if fixture == "coulomb_half_period":
+        assert not gradient["v"].any()
