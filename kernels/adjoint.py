@@ -133,6 +133,22 @@ def step_adjoint_kernel(x_hat: wp.array(dtype=Any), dt: Any, v_hat: wp.array(dty
 
 
 @wp.kernel
+def coupling_transpose_kernel(gathered: wp.array(dtype=Any), area: wp.array(dtype=Any), response: wp.array(dtype=Any),
+                              scale: Any, o_hat: wp.array(dtype=Any), out: wp.array(dtype=Any)):  # fmt: skip
+    """out = a ∘ gathered - scale r ô: the sweep coupling's transpose, scale (Sᵀ M⁻¹ G - r) ô, from `gathered` =
+    scale G M⁻¹ Gᵀ ô (G the points' gather, S = G's transpose weighted by the points' areas a; a = 1 on limit points)."""
+    i = wp.tid()
+    out[i] = area[i] * gathered[i] - (scale * response[i]) * o_hat[i]
+
+
+@wp.kernel
+def area_scale_kernel(values: wp.array(dtype=Any), area: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """out = a ∘ values (a quadrature point's dω̄⁰)."""
+    i = wp.tid()
+    out[i] = area[i] * values[i]
+
+
+@wp.kernel
 def add_vectors_kernel(part: wp.array(dtype=Any), total: wp.array(dtype=Any)):
     """total += part."""
     i = wp.tid()
@@ -299,6 +315,9 @@ def implicit_law_adjoint_kernel(
 declare_overloads(largest_component_kernel, d="vec3[]")
 declare_overloads(step_adjoint_kernel, x_hat="vec3[]", dt="scalar", v_hat="vec3[]", w_hat="vec3[]")
 declare_overloads(add_vectors_kernel, part="vec3[]", total="vec3[]")
+declare_overloads(coupling_transpose_kernel, gathered="vec3[]", area="scalar[]", response="scalar[]", scale="scalar",
+                  o_hat="vec3[]", out="vec3[]")  # fmt: skip
+declare_overloads(area_scale_kernel, values="vec3[]", area="scalar[]", out="vec3[]")
 declare_overloads(scaled_inverse_mass_kernel, w="vec3[]", inverse_mass="scalar[]", scale="scalar", out="vec3[]")
 declare_overloads(probe_kernel, x="vec3[]", d="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", step="scalar", out="vec3[]")
@@ -382,6 +401,17 @@ def eval_step_adjoint(x_hat, v_hat, dt: float, w_hat) -> None:
     """ŵ = v̂ + dt x̂, v̂ = 0."""
     wp.launch(step_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, scalar_of(x_hat)(dt)], outputs=[v_hat, w_hat],
               device=x_hat.device)  # fmt: skip
+
+
+def eval_coupling_transpose(gathered, area, response, scale: float, o_hat, out) -> None:
+    """out = a ∘ gathered - scale r ô (`coupling_transpose_kernel`)."""
+    wp.launch(coupling_transpose_kernel, dim=len(out), inputs=[gathered, area, response, scalar_of(area)(scale), o_hat],
+              outputs=[out], device=out.device)  # fmt: skip
+
+
+def eval_area_scale(values, area, out) -> None:
+    """out = a ∘ values."""
+    wp.launch(area_scale_kernel, dim=len(out), inputs=[values, area], outputs=[out], device=out.device)
 
 
 def eval_add(total, part) -> None:

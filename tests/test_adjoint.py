@@ -140,7 +140,7 @@ def test_the_checkpoints_bytes_grow_as_the_square_root_of_the_steps(substeps):
 @pytest.mark.parametrize("overrides, wrt, message", [
     (["sensitive=true"], ["AC"], "sensitive=false"), (["mechanics=inertial"], ["AC"], "mechanics=overdamped"),
     (["contact_solve=implicit", "sharpness=inf"], ["sharpness"], "no derivative in k_f"),
-    (["contact_solve=implicit", "drag_frame=body"], ["AC"], "drag_frame=lab"), (["contact=area"], ["AC"], "contact=point"), ([], ["density"], "density"),
+    (["contact_solve=implicit", "drag_frame=body"], ["AC"], "drag_frame=lab"), ([], ["density"], "density"),
     (["drag=0"], ["contact_damping"], "--set drag="), (["mu_v=0"], ["mu_v"], "mu_v > 0")])  # fmt: skip
 def test_walks_the_reverse_mode_does_not_cover_are_refused_with_the_fix(overrides, wrt, message):
     with pytest.raises(WalkerGradientError, match=message):
@@ -179,6 +179,17 @@ def test_the_adjoint_through_the_implicit_contact_matches_central_differences_of
     put(run, start)
     adjoint = WalkAdjoint(run, [name]).gradient(steps, settle=True)["gradient"][name]
     assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, 1e-4), rel=1e-5)
+
+
+@pytest.mark.parametrize("contact", [[], COULOMB], ids=["explicit", "implicit"])
+def test_the_adjoint_on_the_area_contact_matches_central_differences_of_whole_runs(contact):
+    """The contact as a pressure on the limit surface's quadrature points: k and β per unit area (per the scene's
+    contact_area), the points' areas in the spread and its transpose."""
+    p = parameters("periods=0.25", "contact=area", *contact)
+    run = settled(p)
+    adjoint = WalkAdjoint(run, ["stiffness", "friction"]).gradient(run.frames * run.steps_per_frame, settle=True)
+    for name in ("stiffness", "friction"):
+        assert adjoint["gradient"][name] == pytest.approx(whole_run_difference(p, run, name, 1e-4), rel=1e-5), name
 
 
 def test_the_implicit_contacts_checkpointed_gradient_equals_the_fully_stored_one_bitwise(coulomb_half_period):

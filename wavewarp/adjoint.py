@@ -1,8 +1,8 @@
 """Reverse mode through a walker's walk, with checkpoints (docs/theory/gradients.md, "Reverse mode").
 
-The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the point contact, explicit with a
-smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the scenes' default: its
-adjoint in wavewarp/adjoint_contact.py), the Koiter shell, the insensitive wave (the chemistry does not see the
+The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the contact on the limit points or
+per area, explicit with a smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the
+scenes' default: its adjoint in wavewarp/adjoint_contact.py), the Koiter shell, the insensitive wave (the chemistry does not see the
 shape: c(t) is data for the mechanics), one world, float64. The objective is the walk's J, the centre of mass's
 displacement along the wave in R from the walk's start to its end. One pass back gives dJ/dθ for every parameter of
 `ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
@@ -35,8 +35,9 @@ from .adjoint_contact import ImplicitContactAdjoint
 from .coupled import GRAPH_SUBSTEPS
 from .device import run_steps
 from .dynamics import InertialSolver
-from .geometry import limit_positions
+from .geometry import limit_positions, limit_surface
 from .kernels.adjoint import (
+    eval_area_scale,
     eval_count,
     eval_damping_adjoint,
     eval_directional_derivative,
@@ -73,11 +74,11 @@ def check_adjoint_walk(p, wrt) -> None:
                                   f"{', '.join(ADJOINT_PARAMETERS)} (central differences take the rest: --method "
                                   "differences)")  # fmt: skip
     needs = [(p.sensitive, "sensitive=false (the wave on the rest shell: the chemistry's adjoint is not built)"),
-             (p.mechanics != "overdamped", "mechanics=overdamped"), (p.contact != "point", "contact=point"),
+             (p.mechanics != "overdamped", "mechanics=overdamped"),
              (p.drag_frame != "lab", "drag_frame=lab")]  # fmt: skip
     missing = [fix for needed, fix in needs if needed]
     if missing:
-        raise WalkerGradientError("the reverse mode covers the overdamped walk on the point contact with the "
+        raise WalkerGradientError("the reverse mode covers the overdamped walk with the "
                                   f"insensitive wave; set {'; '.join(missing)}, or take central differences "
                                   "(--method differences)")  # fmt: skip
     if "sharpness" in wrt and math.isinf(p.sharpness):
@@ -128,8 +129,13 @@ class WalkAdjoint:
             self._seed = wp.array(seed, dtype=shell.vec3)
             self._scratch = {name: wp.zeros(n, dtype=shell.vec3) for name in
                              ("x_hat", "v_hat", "w_hat", "force_hat", "probe", "plus", "minus", "forces", "term",
-                              "p", "u", "a", "unused", "p_hat", "u_hat", "x", "v", "v_next", "v_star", "a_ctrl",
-                              "u_star_hat", "v_star_hat")}  # fmt: skip
+                              "x", "v", "v_next", "v_star", "a_ctrl", "v_star_hat")}  # fmt: skip
+            points = self.solver.ground_points  # the ground's: limit points, or quadrature points (area contact)
+            self._points = {name: wp.zeros(points, dtype=shell.vec3) for name in
+                            ("p", "u", "a", "unused", "p_hat", "u_hat", "u_star_hat")}  # fmt: skip
+            self._patch, area = self.solver.ground_tables()
+            self._area = area  # dω̄⁰ at the quadrature points (area contact), None on limit points
+            self._unit_area = None if area is None else wp.ones(points, dtype=shell.scalar)
             self._counters = {"step": wp.zeros(1, dtype=wp.int32), "substep": wp.zeros(1, dtype=wp.int32)}
             self._c_start, self._c_end = wp.empty_like(self.wave.c), wp.empty_like(self.wave.c)
             self._largest = wp.zeros(1, dtype=wp.float64)
@@ -345,12 +351,13 @@ class WalkAdjoint:
         contact.forward(x, s["v_star"], scale, dt)
         eval_step_adjoint(s["x_hat"], s["v_hat"], dt, s["w_hat"])
         eval_scaled_inverse_mass(s["w_hat"], solver.inverse_mass, scale, s["a_ctrl"])
-        ground_motion(solver.ground, s["a_ctrl"], s["a_ctrl"], solver.mask, None, s["a"], s["unused"])
-        s["p_hat"].zero_()
-        contact.backward(s["a"], scale, dt, s["u_star_hat"], s["p_hat"])
+        pts = self._points
+        self._gather(solver, s["a_ctrl"], pts["a"], weighted=True)
+        pts["p_hat"].zero_()
+        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"])
         wp.copy(s["v_star_hat"], s["w_hat"])
-        spread_to_control_points(solver.ground, s["u_star_hat"], solver.mask, None, None, s["v_star_hat"])
-        spread_to_control_points(solver.ground, s["p_hat"], solver.mask, None, None, s["x_hat"])
+        self._spread(solver, pts["u_star_hat"], s["v_star_hat"])
+        self._spread(solver, pts["p_hat"], s["x_hat"])
         if overdamped:  # v* = (F/M + g - a_rigid)/ζ; v̂ stays 0: the step does not read v
             eval_scaled_inverse_mass(s["v_star_hat"], solver.inverse_mass, scale, s["force_hat"])
             if "drag" in self.wrt:
@@ -407,11 +414,23 @@ class WalkAdjoint:
         parameters."""
         s, solver = self._scratch, self.solver
         force_hat, ground = s["force_hat"], solver.ground
-        ground_motion(ground, x, v, solver.mask, None, s["p"], s["u"])
-        ground_motion(ground, force_hat, force_hat, solver.mask, None, s["a"], s["unused"])
-        eval_ground_adjoint(ground, s["p"], s["u"], s["a"], s["p_hat"], s["u_hat"], self._ground_gradient)
-        spread_to_control_points(ground, s["p_hat"], solver.mask, None, None, s["x_hat"])
-        spread_to_control_points(ground, s["u_hat"], solver.mask, None, None, s["v_hat"])
+        pts = self._points
+        ground_motion(ground, x, v, solver.mask, self._patch, pts["p"], pts["u"])
+        self._gather(solver, force_hat, pts["a"], weighted=True)
+        eval_ground_adjoint(ground, pts["p"], pts["u"], pts["a"], pts["p_hat"], pts["u_hat"], self._ground_gradient)
+        self._spread(solver, pts["p_hat"], s["x_hat"])
+        self._spread(solver, pts["u_hat"], s["v_hat"])
+
+    def _gather(self, solver, field, out, weighted: bool) -> None:
+        """out = G field at the ground's points (L, or the quadrature basis N), times each point's dω̄⁰ where
+        `weighted` and the contact is per area: the transpose of the spread that takes their forces to the vertices."""
+        ground_motion(solver.ground, field, field, solver.mask, self._patch, out, self._points["unused"])
+        if weighted and self._area is not None:
+            eval_area_scale(out, self._area, out)
+
+    def _spread(self, solver, point_values, out) -> None:
+        """out += Gᵀ point_values (the adjoint of the gather: unweighted)."""
+        spread_to_control_points(solver.ground, point_values, solver.mask, self._patch, self._unit_area, out)
 
     # ---------------------------------------------------------------- the settling
     def _settle_phases(self) -> list:
@@ -499,11 +518,18 @@ class WalkAdjoint:
         self._run(backward, count, ("settle backward", id(solver)), 1)
 
     def _placement_stiffness(self) -> np.ndarray:
-        """The ground gradient's share of the placement: the walker starts lowered by the depth d at which k Σ pen² bears
-        its weight (`ground_lift`), ∂z/∂k = Σ pen² / (2k Σ pen), pen the limit points' depths below z = 0."""
-        depths = np.maximum(-limit_positions(self.run.mesh, device="cpu", dtype="float64")[:, 2], 0.0)
+        """The ground gradient's share of the placement: the walker starts lowered by the depth d at which k Σ w pen²
+        bears its weight (`ground_lift`), ∂z/∂k = Σ w pen² / (2k Σ w pen), pen the ground's points' depths below z = 0
+        (limit points, w = 1; or quadrature points, w = dω̄⁰)."""
+        if self._area is None:
+            z, weights = limit_positions(self.run.mesh, device="cpu", dtype="float64")[:, 2], 1.0
+        else:
+            surface = limit_surface(self.run.mesh, device="cpu", dtype="float64")
+            z, weights = surface.points[:, 2], surface.area
+        depths = np.maximum(-z, 0.0)
         k = self.solver.ground.stiffness
-        lowering = np.sum(depths**2) / (2.0 * k * np.sum(depths)) if np.sum(depths) > 0 else 0.0
+        held = np.sum(weights * depths)
+        lowering = np.sum(weights * depths**2) / (2.0 * k * held) if held > 0 else 0.0
         share = np.zeros(len(GROUND_PARAMETERS))
         share[GROUND_PARAMETERS.index("stiffness")] = lowering * float(np.sum(self._scratch["x_hat"].numpy()[:, 2]))
         return share
@@ -515,6 +541,8 @@ class WalkAdjoint:
             ground = ground + contact.gradient.numpy()[:4]
             if key == id(self.solver):
                 shell[-1] -= contact.gradient.numpy()[4] / self.solver.drag**2
+        per = self.run.resolved["contact_area"] if self._area is not None else 1.0
+        ground[:2] /= per  # the law's k and β are the scene's per contact area
         values = {**dict(zip(SHELL_PARAMETERS, shell)), "drag": shell[-1], **dict(zip(GROUND_PARAMETERS, ground))}
         return {name: float(values[name]) for name in self.wrt}
 

@@ -158,6 +158,11 @@ class InertialSolver:
         self.contact_damping = self._contact_damping()
 
     inverse_mass = property(lambda self: self._inverse_mass)  # 1/M per control point, on the device
+    ground_points = property(lambda self: len(self._limit_x))  # the ground's points: limit or quadrature points
+
+    def ground_tables(self) -> tuple:
+        """(patch tables, dω̄⁰ per point or None): what the ground's gather and spread take (`eval_ground`)."""
+        return self.shell.tables.patch(), self._rest_area
 
     def state(self, x0=None, v0=None) -> State:
         """x0 (default: the mesh's own positions) and v0 (default 0), checked, on the device."""
