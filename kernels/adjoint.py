@@ -46,33 +46,6 @@ def weighted_dot_kernel(a: wp.array(dtype=Any), b: wp.array(dtype=Any), weight: 
 
 
 @wp.kernel
-def overdamped_velocity_adjoint_kernel(
-    x_hat: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), inverse_drag: Any, dt: Any,
-    v_hat: wp.array(dtype=Any), w_hat: wp.array(dtype=Any), force_hat: wp.array(dtype=Any),
-):  # fmt: skip
-    """Adjoint of v' = F/(ζ M), x' = x + dt v': ŵ = v̂' + dt x̂' (the new velocity's), F̂ = ŵ / (ζ M); v̂ = 0 (the old
-    velocity reaches v' through the ground alone, added after)."""
-    i = wp.tid()
-    w = v_hat[i] + dt * x_hat[i]
-    w_hat[i] = w
-    force_hat[i] = (inverse_drag * inverse_mass[i]) * w
-    v_hat[i] = type(w)()
-
-
-@wp.kernel
-def symplectic_velocity_adjoint_kernel(
-    x_hat: wp.array(dtype=Any), v_hat: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), dt: Any,
-    w_hat: wp.array(dtype=Any), force_hat: wp.array(dtype=Any),
-):  # fmt: skip
-    """Adjoint of symplectic Euler's v' = v + dt a, x' = x + dt v': ŵ = v̂' + dt x̂' (the new velocity's), F̂ = dt ŵ / M
-    (the damping's share of v̂ and x̂ follows, `damping_adjoint_kernel`)."""
-    i = wp.tid()
-    w = v_hat[i] + dt * x_hat[i]
-    w_hat[i] = w
-    force_hat[i] = (dt * inverse_mass[i]) * w
-
-
-@wp.kernel
 def damping_sums_kernel(w_hat: wp.array(dtype=wp.vec3d), x: wp.array(dtype=wp.vec3d), mass: wp.array(dtype=wp.float64),
                         rigid: wp.array(dtype=wp.vec3d), sums: wp.array(dtype=wp.vec3d),
                         second_moment: wp.array(dtype=wp.mat33d)):  # fmt: skip
@@ -322,10 +295,6 @@ declare_overloads(scaled_inverse_mass_kernel, w="vec3[]", inverse_mass="scalar[]
 declare_overloads(probe_kernel, x="vec3[]", d="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
-declare_overloads(overdamped_velocity_adjoint_kernel, x_hat="vec3[]", inverse_mass="scalar[]", inverse_drag="scalar",
-                  dt="scalar", v_hat="vec3[]", w_hat="vec3[]", force_hat="vec3[]")  # fmt: skip
-declare_overloads(symplectic_velocity_adjoint_kernel, x_hat="vec3[]", v_hat="vec3[]", inverse_mass="scalar[]", dt="scalar",
-                  w_hat="vec3[]", force_hat="vec3[]")  # fmt: skip
 declare_overloads(ground_adjoint_kernel, p="vec3[]", u="vec3[]", force_hat="vec3[]", k="scalar", beta="scalar",
                   mu="scalar", k_f="scalar", p_hat="vec3[]", u_hat="vec3[]")  # fmt: skip
 
@@ -367,20 +336,6 @@ def eval_weighted_dot(a: wp.array, b: wp.array, weight: float, slot: int, total:
     """total[slot] += weight a · b."""
     wp.launch(weighted_dot_kernel, dim=len(a), inputs=[a, b, wp.float64(weight), int(slot)], outputs=[total],
               device=a.device)  # fmt: skip
-
-
-def eval_overdamped_velocity_adjoint(x_hat, inverse_mass, inverse_drag: float, dt: float, v_hat, w_hat, force_hat):
-    """ŵ = v̂ + dt x̂, F̂ = ŵ / (ζ M), v̂ = 0."""
-    s = scalar_of(inverse_mass)
-    wp.launch(overdamped_velocity_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, inverse_mass, s(inverse_drag), s(dt)],
-              outputs=[v_hat, w_hat, force_hat], device=x_hat.device)  # fmt: skip
-
-
-def eval_symplectic_velocity_adjoint(x_hat, v_hat, inverse_mass, dt: float, w_hat, force_hat) -> None:
-    """ŵ = v̂ + dt x̂, F̂ = dt ŵ / M."""
-    wp.launch(symplectic_velocity_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, v_hat, inverse_mass,
-                                                                          scalar_of(inverse_mass)(dt)],
-              outputs=[w_hat, force_hat], device=x_hat.device)  # fmt: skip
 
 
 def eval_damping_adjoint(w_hat, x, v, mass, rigid, total_mass: float, rate: float, sums, second_moment, x_hat,
@@ -425,13 +380,18 @@ def eval_scaled_inverse_mass(w, inverse_mass, scale: float, out) -> None:
               outputs=[out], device=w.device)  # fmt: skip
 
 
+def implicit_laws(ground, scale: float, dt: float) -> list:
+    """The implicit ground law's launch arguments after the points' arrays (float64): scale, dt, k, β, μ, k_f."""
+    return [wp.float64(value) for value in (scale, dt, ground.stiffness, ground.damping, ground.friction,
+                                            ground.sharpness)]  # fmt: skip
+
+
 def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, force_hat, u_hat, p_hat,
                               gradient) -> None:  # fmt: skip
     """û (overwritten) and p̂ += ẑ of the implicit ground law at every point given f̂; gradient[0..4] += ∂/∂(k, β, μ,
     k_f, scale) (`implicit_law_adjoint_kernel`)."""
-    laws = [wp.float64(value) for value in (scale, dt, ground.stiffness, ground.damping, ground.friction,
-                                            ground.sharpness)]  # fmt: skip
-    wp.launch(implicit_law_adjoint_kernel, dim=len(p), inputs=[p, u, response, *laws, force_hat],
+    wp.launch(implicit_law_adjoint_kernel, dim=len(p), inputs=[p, u, response, *implicit_laws(ground, scale, dt),
+                                                               force_hat],
               outputs=[u_hat, p_hat, gradient], device=p.device)  # fmt: skip
 
 

@@ -172,13 +172,16 @@ def coulomb_half_period():
     return run, [wp.clone(a) for a in walk_state(run)], run.frames * run.steps_per_frame
 
 
-@pytest.mark.parametrize("name", ["friction", "drag"])
-def test_the_adjoint_through_the_implicit_contact_matches_central_differences_of_whole_runs(coulomb_half_period, name):
-    """Coulomb's stick and slip make J piecewise smooth: a step of 1e-3 θ crosses their switches, 1e-4 does not."""
-    run, start, steps = coulomb_half_period
+@pytest.mark.parametrize("walker, name, relative", [("half_period", "stiffness", 1e-3), ("half_period", "thickness", 1e-3),
+                                                   ("coulomb_half_period", "friction", 1e-4),
+                                                   ("coulomb_half_period", "drag", 1e-4)])  # fmt: skip
+def test_the_adjoint_through_the_settling_matches_central_differences_of_whole_runs(walker, name, relative, request):
+    """On the explicit contact and the implicit one with Coulomb's law, whose stick and slip make J piecewise smooth:
+    a step of 1e-3 θ crosses their switches, 1e-4 does not."""
+    run, start, steps = request.getfixturevalue(walker)
     put(run, start)
     adjoint = WalkAdjoint(run, [name]).gradient(steps, settle=True)["gradient"][name]
-    assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, 1e-4), rel=1e-5)
+    assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, relative), rel=1e-5)
 
 
 @pytest.mark.parametrize("contact", [[], COULOMB], ids=["explicit", "implicit"])
@@ -200,14 +203,6 @@ def test_the_implicit_contacts_checkpointed_gradient_equals_the_fully_stored_one
         results.append(WalkAdjoint(run, ["AC", "friction", "drag"], checkpoint_every=every).gradient(steps, settle=True))
     assert results[0]["gradient"] == results[1]["gradient"]
     assert np.array_equal(results[0]["start"]["x"], results[1]["start"]["x"])
-
-
-@pytest.mark.parametrize("name", ["stiffness", "thickness"])
-def test_the_adjoint_through_the_settling_matches_central_differences_of_whole_runs(half_period, name):
-    run, start, steps = half_period
-    put(run, start)
-    adjoint = WalkAdjoint(run, [name]).gradient(steps, settle=True)["gradient"][name]
-    assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, 1e-3), rel=1e-5)
 
 
 def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points(capsys):

@@ -42,12 +42,10 @@ from .kernels.adjoint import (
     eval_damping_adjoint,
     eval_directional_derivative,
     eval_ground_adjoint,
-    eval_overdamped_velocity_adjoint,
     eval_pull,
     eval_push,
     eval_scaled_inverse_mass,
     eval_step_adjoint,
-    eval_symplectic_velocity_adjoint,
     eval_weighted_dot,
 )
 from .kernels.contact import ground_motion, spread_to_control_points
@@ -358,29 +356,38 @@ class WalkAdjoint:
         wp.copy(s["v_star_hat"], s["w_hat"])
         self._spread(solver, pts["u_star_hat"], s["v_star_hat"])
         self._spread(solver, pts["p_hat"], s["x_hat"])
-        if overdamped:  # v* = (F/M + g - a_rigid)/ζ; v̂ stays 0: the step does not read v
-            eval_scaled_inverse_mass(s["v_star_hat"], solver.inverse_mass, scale, s["force_hat"])
-            if "drag" in self.wrt:
-                eval_weighted_dot(s["v_star_hat"], s["v_star"], -scale, len(SHELL_PARAMETERS), self._shell_gradient)
-        else:  # v* = v + dt (F/M + g - a_rigid - η (v - v_rigid))
-            eval_scaled_inverse_mass(s["v_star_hat"], solver.inverse_mass, dt, s["force_hat"])
-            eval_damping_adjoint(s["v_star_hat"], x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass,
-                                 dt * solver.damping, self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
+        if overdamped:  # v̂ stays 0: the step does not read v
+            self._mobility_adjoint(s["v_star_hat"], s["v_star"])
+        else:
+            self._symplectic_adjoint(solver, x, v, dt, s["v_star_hat"])
 
     def _overdamped_adjoint(self, x, v_next, dt: float) -> None:
-        """The overdamped update's adjoint: F̂ from x̂', v̂' (v̂ = 0 before the ground's share), the drag's gradient."""
-        s, solver = self._scratch, self.solver
-        eval_overdamped_velocity_adjoint(s["x_hat"], solver.inverse_mass, 1.0 / solver.drag, dt, s["v_hat"], s["w_hat"],
-                                         s["force_hat"])  # fmt: skip
-        if "drag" in self.wrt:
-            eval_weighted_dot(s["w_hat"], v_next, -1.0 / solver.drag, len(SHELL_PARAMETERS), self._shell_gradient)
+        """The explicit overdamped step's adjoint: ŵ = v̂' + dt x̂' (v̂ = 0 before the ground's share), then the
+        mobility's."""
+        s = self._scratch
+        eval_step_adjoint(s["x_hat"], s["v_hat"], dt, s["w_hat"])
+        self._mobility_adjoint(s["w_hat"], v_next)
 
     def _inertial_adjoint(self, solver, x, v, dt: float) -> None:
-        """Symplectic Euler's adjoint with the damping toward the rigid-body motion: F̂, v̂ and x̂'s share from it."""
+        """The explicit symplectic Euler step's adjoint: ŵ = v̂' + dt x̂', then the velocity update's."""
         s = self._scratch
-        eval_symplectic_velocity_adjoint(s["x_hat"], s["v_hat"], solver.inverse_mass, dt, s["w_hat"], s["force_hat"])
-        eval_damping_adjoint(s["w_hat"], x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass,
-                             dt * solver.damping, self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
+        eval_step_adjoint(s["x_hat"], s["v_hat"], dt, s["w_hat"])
+        self._symplectic_adjoint(solver, x, v, dt, s["w_hat"])
+
+    def _mobility_adjoint(self, w_hat, velocity) -> None:
+        """velocity = (F/M + g - a_rigid)/ζ backwards from its adjoint w_hat: F̂ = ŵ/(ζM), the drag's -ŵ·velocity/ζ."""
+        solver = self.solver
+        eval_scaled_inverse_mass(w_hat, solver.inverse_mass, 1.0 / solver.drag, self._scratch["force_hat"])
+        if "drag" in self.wrt:
+            eval_weighted_dot(w_hat, velocity, -1.0 / solver.drag, len(SHELL_PARAMETERS), self._shell_gradient)
+
+    def _symplectic_adjoint(self, solver, x, v, dt: float, w_hat) -> None:
+        """v' = v + dt (F/M + g - a_rigid - η (v - v_rigid)) backwards from its adjoint w_hat: F̂ = dt ŵ/M, and v̂ and
+        x̂'s share through the damping toward the rigid-body motion."""
+        s = self._scratch
+        eval_scaled_inverse_mass(w_hat, solver.inverse_mass, dt, s["force_hat"])
+        eval_damping_adjoint(w_hat, x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass, dt * solver.damping,
+                             self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
 
     def _shell_adjoint(self, x, couplings: bool) -> None:
         """F̂ (the step's force adjoint) back to x̂ through the shell (-H F̂) and to its parameters; `couplings`: AC and
@@ -449,35 +456,36 @@ class WalkAdjoint:
     def replay_settling(self) -> np.ndarray:
         """The run's settling replayed from the placement (the adjoint's forward pass through it, on its own state);
         returns the settled positions (V × 3 NumPy), the walk's start. Leaves the shell's reference at the wave's c."""
+        self._settle_forward()
+        self.shell.update_reference(self.wave.c)
+        return self._settling[1].x.numpy().astype(np.float64)
+
+    def _settle_forward(self) -> list:
+        """The settling from the placement at c = 0, each phase from rest: [((solver, dt, steps), (checkpoints,
+        spacing))] per phase (`_mechanics_forward`); the shell's reference is left at c = 0."""
         self.shell.update_reference(wp.zeros_like(self.wave.c))
-        phases, state = self._settle_phases(), self._settling[1]
-        state.x.assign(self.run.mesh.vertices)
+        phases = self._settle_phases()
+        state = self._settling[1]
+        state.x.assign(self.run.mesh.vertices)  # the placement
+        passes = []
         for solver, dt, steps in phases:
             state.v.zero_()
-            self._mechanics_forward(solver, dt, steps, state)
-        self.shell.update_reference(self.wave.c)
-        return state.x.numpy().astype(np.float64)
+            passes.append(((solver, dt, steps), self._mechanics_forward(solver, dt, steps, state)))
+        return passes
 
     def _settle_adjoint(self) -> None:
         """x̂, v̂ at the walk's start → the placement, through the settling's two phases (checkpointed as the walk),
         and the placement's depth into the stiffness's gradient."""
-        shell, s = self.shell, self._scratch
-        shell.update_reference(wp.zeros_like(self.wave.c))
-        phases = self._settle_phases()
+        passes = self._settle_forward()
         state = self._settling[1]
-        state.x.assign(self.run.mesh.vertices)  # the placement
-        starts = []
-        for solver, dt, steps in phases:  # forward: each phase's checkpoints, each phase from rest
-            state.v.zero_()
-            starts.append(self._mechanics_forward(solver, dt, steps, state))
-        for (solver, dt, steps), (checkpoints, every) in reversed(list(zip(phases, starts))):
+        for (solver, dt, steps), (checkpoints, every) in reversed(passes):
             for index in reversed(range(len(checkpoints[0]))):
                 self._mechanics_backward(solver, dt, min(every, steps - index * every), state,
                                          [store[index] for store in checkpoints])  # fmt: skip
-            s["v_hat"].zero_()
+            self._scratch["v_hat"].zero_()  # each phase starts from rest
         if "stiffness" in self.wrt:
             self._placement = self._placement_stiffness()
-        shell.update_reference(self.wave.c)
+        self.shell.update_reference(self.wave.c)
 
     def _mechanics_forward(self, solver, dt: float, steps: int, state) -> list:
         """`steps` mechanics steps of `solver` on `state` from where it is; returns the (x, v) checkpoints and their

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_implicit_law_adjoint, eval_weighted_dot
+from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_implicit_law_adjoint, eval_weighted_dot, implicit_laws
 from .kernels.contact import (
     contact_indicator_kernel,
     ground_motion,
@@ -51,10 +51,6 @@ class ImplicitContactAdjoint:
             self.others = [wp.zeros(n, dtype=wp.vec3d) for _ in range(sweeps + 1)]  # o^1 … o^S (o^0 = u*)
             self.o_hat, self.f_hat, self.gathered = (wp.zeros(n, dtype=wp.vec3d) for _ in range(3))
 
-    def _laws(self, scale: float, dt: float) -> list:
-        g = self.ground
-        return [wp.float64(value) for value in (scale, dt, g.stiffness, g.damping, g.friction, g.sharpness)]
-
     def _coupled(self, forces, predictor, response, area, scale: float, out) -> None:
         """out = predictor + scale (G M⁻¹ S_area forces - response forces) (the sweep's velocity without the point's
         own force; `area` weights the spread: the points' areas, or 1 for the transpose's first half)."""
@@ -76,7 +72,7 @@ class ImplicitContactAdjoint:
         kernel = limit_response_kernel if self.point else quadrature_response_kernel
         wp.launch(kernel, dim=n, inputs=[self.load, self.solver.inverse_mass, *self.tables], outputs=[self.response],
                   device=device)  # fmt: skip
-        laws = self._laws(scale, dt)
+        laws = implicit_laws(self.ground, scale, dt)
         velocities = self.u_star
         for s in range(len(self.forces)):
             if s > 0:

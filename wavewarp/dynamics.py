@@ -241,8 +241,7 @@ class InertialSolver:
         x, v = state_out.x, state_out.v
         with wp.ScopedDevice(self.device):
             self.shell.forces_device(x, self._forces)
-            eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self.worlds, self._reduction_threads,
-                                  self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+            self._rigid_rows(x, v, self.damping > 0)
             if self.implicit:
                 self._integrate(x, v, dt, move=False)
                 eval_implicit_ground(self.ground, x, v, self._inverse_mass, self._response_scale(dt), dt, self.mask,
@@ -259,16 +258,19 @@ class InertialSolver:
         wp.copy(out, v)
         with wp.ScopedDevice(self.device):
             self.shell.forces_device(x, self._forces)
-            eval_rigid_correction(self._forces, self._mass, x, v, self.damping > 0, self.worlds, self._reduction_threads,
-                                  self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+            self._rigid_rows(x, v, self.damping > 0)
             self._integrate(x, out, dt, move=False)
 
     def rigid_motion(self, x: wp.array, v: wp.array) -> wp.array:
         """The rigid-body rows of x, v (kernels/dynamics.py, per world: [N/ΣM, α, centre, v̄, Ω], the first two of the
         force buffer as it is): the centre, the mean velocity and the rotation the damping acts relative to."""
-        eval_rigid_correction(self._forces, self._mass, x, v, True, self.worlds, self._reduction_threads,
-                              self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
+        self._rigid_rows(x, v, True)
         return self._rigid
+
+    def _rigid_rows(self, x: wp.array, v: wp.array, with_momentum: bool) -> None:
+        """self._rigid: the rigid-body rows of the force buffer at x, v (`eval_rigid_correction`)."""
+        eval_rigid_correction(self._forces, self._mass, x, v, with_momentum, self.worlds, self._reduction_threads,
+                              self._inverse_total_mass, self._rigid_sums, self._second_moment, self._rigid)  # fmt: skip
 
     def _response_scale(self, dt: float) -> float:
         """A point's velocity change per unit of M⁻¹ × force over a step: dt (inertia)."""
