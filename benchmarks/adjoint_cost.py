@@ -1,8 +1,9 @@
 """What the reverse mode costs (issue 31): the wall time of `WalkAdjoint.gradient` against the plain walk it
-differentiates, and the states it holds, against the horizon N (chemistry steps), with checkpoints every ⌈√N⌉ steps
-and with every substep stored (one stretch), on one settled walker (float64, the paper's walker model: overdamped,
-explicit point contact, k_f = 0.1, the insensitive wave); and at the longest horizon the gradient through the
-whole run (back through the settling too) against the settling's replay plus the walk.
+differentiates, and the states it holds, against the horizon N (chemistry steps), with checkpoints at the spacing
+that holds the fewest bytes (`checkpoint_spacing`, O(√N)) and with every substep stored (one stretch), on one
+settled walker (float64, the paper's walker model: overdamped, explicit point contact, k_f = 0.1, the insensitive
+wave); and at the longest horizon the gradient through the whole run (back through the settling too) against the
+settling's replay plus the walk.
 
     wavewarp bench adjoint_cost --device cuda --periods 0.25 0.5 1 2 --out benchmarks/results
     wavewarp bench adjoint_cost --device cpu --set level=1 --periods 0.25 0.5 1

@@ -7,6 +7,11 @@ import warp as wp
 
 from . import declare_overloads, scalar_of
 from .contact import slip_speed as slip_root
+from .limit_surface import basis_row, patch_jet, patch_scalar
+from .reduce import REDUCTION_BLOCK, block_add
+from .shell import VolumeMoments, koiter_jet, material_stress, volume_centroid_force, world_volume_terms
+
+ShellRates = wp.types.vector(length=5, dtype=wp.float64)  # `shell_rates_kernel`'s five sums
 
 
 @wp.kernel
@@ -285,6 +290,90 @@ def implicit_law_adjoint_kernel(
     wp.atomic_add(gradient, 4, r_hat * response[i])
 
 
+@wp.func
+def form_rates(x1: Any, x2: Any, x11: Any, x12: Any, x22: Any, n: Any, j: Any, d1: Any, d2: Any, d11: Any, d12: Any,
+               d22: Any):  # fmt: skip
+    """ȧ, ḃ: the first and second forms' derivatives as the patch moves along d (d,α and d,αβ its jet), with
+    ṅ = (I - nnᵀ)(d,1 × x,2 + x,1 × d,2)/j; and the area vector's derivative."""
+    area_rate = wp.cross(d1, x2) + wp.cross(x1, d2)
+    n_rate = (area_rate - wp.dot(n, area_rate) * n) / j
+    a12 = wp.dot(d1, x2) + wp.dot(x1, d2)
+    a_rate = wp.matrix(type(j)(2.0) * wp.dot(d1, x1), a12, a12, type(j)(2.0) * wp.dot(d2, x2), shape=(2, 2))
+    b12 = wp.dot(n_rate, x12) + wp.dot(n, d12)
+    b11 = wp.dot(n_rate, x11) + wp.dot(n, d11)
+    b_rate = wp.matrix(b11, b12, b12, wp.dot(n_rate, x22) + wp.dot(n, d22), shape=(2, 2))
+    return a_rate, b_rate, area_rate
+
+
+@wp.kernel
+def shell_rates_kernel(
+    x: wp.array(dtype=Any),
+    direction: wp.array(dtype=Any),
+    c: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    ref_metric: wp.array(dtype=Any),
+    ref_metric_inv: wp.array(dtype=Any),
+    ref_curvature: wp.array(dtype=Any),
+    ref_weight: wp.array(dtype=Any),
+    rest_curvature: wp.array(dtype=Any),
+    stretching_modulus: wp.array(dtype=Any),
+    bending_modulus: wp.array(dtype=Any),
+    nu: Any,
+    moments: wp.array(dtype=VolumeMoments),
+    target: wp.array(dtype=wp.float64),
+    penalty: wp.array(dtype=wp.float64),
+    rates: wp.array(dtype=ShellRates),
+):
+    """rates[0] += the rates of change of E_S, E_B and E_V as x moves along d, and the derivatives of Ė_S + Ė_B in AC
+    and AI (one world; docs/theory/gradients.md, "The shell's parameters"): with ā = λā⁰ (λ = e^{-AC c}),
+    ∂/∂AC (Ė_S + Ė_B) = c (Ė_S + Ė_B + S_m ω̄ 2(1+ν) ā⁻¹ : ȧ) per point, and ∂K/∂AI = c ā⁻¹ b̄⁰. One thread per
+    quadrature point (whole blocks: the threads past them add zero); the first V threads add the volume's centroid
+    term -d_I · F_x̄ (kernels/shell.py `volume_centroid_force`)."""
+    q = wp.tid()
+    value = ShellRates()
+    if q < ref_weight.shape[0]:
+        t, row = basis_row(triangle_type, points_per_triangle, q)
+        inv = ref_metric_inv[q]
+        membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
+            x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
+        )
+        dp, d1, d2, d11, d12, d22 = patch_jet(direction, patch_start, patch_vertices, basis, t, row)
+        a_rate, b_rate, area_rate = form_rates(x1, x2, x11, x12, x22, n, j, d1, d2, d11, d12, d22)
+        stretching_weight = stretching_modulus[0] * ref_weight[q]
+        bending_weight = bending_modulus[0] * ref_weight[q]
+        stretching = stretching_weight * wp.ddot(material_stress(membrane, inv, nu), a_rate)
+        bending_rate = bending_weight * wp.ddot(material_stress(bending, inv, nu), b_rate)
+        cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
+        one = type(nu)(1.0)
+        metric = cq * (stretching + bending_rate + stretching_weight * (one + one) * (one + nu) * wp.ddot(inv, a_rate))
+        curvature = bending_weight * wp.ddot(material_stress(cq * (inv * rest_curvature[q]), inv, nu), b_rate)
+        centroid, pressure = world_volume_terms(x, moments, target, penalty, 1, 0)
+        scale = type(nu)(pressure) * weights[q % points_per_triangle]
+        volume = scale * (wp.dot(dp, wp.cross(x1, x2)) + wp.dot(p - centroid, area_rate))
+        if q < x.shape[0]:
+            volume = volume - wp.dot(direction[q], type(x[q])(volume_centroid_force(moments, target, penalty,
+                                                                                    x.shape[0], q)))  # fmt: skip
+        value = ShellRates(wp.float64(stretching), wp.float64(bending_rate), wp.float64(volume), wp.float64(metric),
+                           wp.float64(curvature))  # fmt: skip
+    block_add(rates, 0, value)
+
+
+@wp.kernel
+def shell_parameter_gradient_kernel(rates: wp.array(dtype=ShellRates), factors: wp.array2d(dtype=wp.float64),
+                                    gradient: wp.array(dtype=wp.float64)):  # fmt: skip
+    """gradient[i] -= Σ_k factors[i, k] rates[0][k]: F̂ · ∂F/∂θ = -∂Ė/∂θ, Ė's terms scaled by each parameter's power."""
+    i = wp.tid()
+    total = wp.float64(0.0)
+    for k in range(5):
+        total += factors[i, k] * rates[0][k]
+    gradient[i] = gradient[i] - total
+
+
 declare_overloads(largest_component_kernel, d="vec3[]")
 declare_overloads(step_adjoint_kernel, x_hat="vec3[]", dt="scalar", v_hat="vec3[]", w_hat="vec3[]")
 declare_overloads(add_vectors_kernel, part="vec3[]", total="vec3[]")
@@ -295,6 +384,9 @@ declare_overloads(scaled_inverse_mass_kernel, w="vec3[]", inverse_mass="scalar[]
 declare_overloads(probe_kernel, x="vec3[]", d="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", step="scalar", out="vec3[]")
 declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
+declare_overloads(shell_rates_kernel, x="vec3[]", direction="vec3[]", c="scalar[]", basis="vec6[,]", weights="scalar[]",
+                  ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]",
+                  rest_curvature="mat22[]", stretching_modulus="scalar[]", bending_modulus="scalar[]", nu="scalar")
 declare_overloads(ground_adjoint_kernel, p="vec3[]", u="vec3[]", force_hat="vec3[]", k="scalar", beta="scalar",
                   mu="scalar", k_f="scalar", p_hat="vec3[]", u_hat="vec3[]")  # fmt: skip
 
@@ -401,3 +493,20 @@ def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None
     wp.launch(ground_adjoint_kernel, dim=len(p), inputs=[p, u, force_hat, s(ground.stiffness), s(ground.damping),
                                                          s(ground.friction), s(ground.sharpness)],
               outputs=[p_hat, u_hat, gradient], device=p.device)  # fmt: skip
+
+
+def eval_shell_rates(x, direction, c, patch: list, reference: list, rest_curvature, moduli: list, nu, volume: list,
+                     rates) -> None:  # fmt: skip
+    """rates[0] = `shell_rates_kernel`'s sums (zeroed here): `patch` the weighted patch tables, `reference` ā, ā⁻¹, b̄,
+    dω̄, `moduli` the stretching and bending moduli's arrays, `volume` the moments at x, V̄ and the penalty."""
+    rates.zero_()
+    points = len(reference[-1])
+    wp.launch(shell_rates_kernel, dim=-(-points // REDUCTION_BLOCK) * REDUCTION_BLOCK,
+              inputs=[x, direction, c, *patch, *reference, rest_curvature, *moduli, scalar_of(x)(nu), *volume],
+              outputs=[rates], block_dim=REDUCTION_BLOCK, device=x.device)  # fmt: skip
+
+
+def eval_shell_parameter_gradient(rates, factors, gradient) -> None:
+    """gradient[i] -= factors[i] · rates[0] (`shell_parameter_gradient_kernel`; one row per slot)."""
+    wp.launch(shell_parameter_gradient_kernel, dim=factors.shape[0], inputs=[rates, factors], outputs=[gradient],
+              device=gradient.device)  # fmt: skip

@@ -13,7 +13,10 @@ import warp as wp
 from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
 from wavewarp.benchmarks.inverse_design import main as inverse_design
 from wavewarp.cli import main
+from wavewarp.kernels.adjoint import ShellRates
+from wavewarp.mesh import icosphere
 from wavewarp.parameters import load_scene, resolve
+from wavewarp.shell import Shell
 from wavewarp.walker import WalkerRun
 from wavewarp.walker_gradients import WalkerGradientError
 
@@ -63,6 +66,35 @@ def difference_from_start(p, start, steps, name, relative) -> float:
         put(run, start)
         ends.append(WalkAdjoint(run).walk(steps))
     return (ends[0] - ends[1]) / (2.0 * delta)
+
+
+def direction_dot_forces(mesh, x, c, direction, **moduli) -> float:
+    """d · F(x) of a float64 shell built with `moduli` (thickness, young, AC, AI, volume_penalty)."""
+    shell = Shell(mesh, moduli.pop("thickness"), moduli.pop("young"), dtype="float64", device="cpu", **moduli)
+    return float(np.sum(shell.forces(x, c) * direction))
+
+
+def test_the_shells_rates_match_the_forces_and_their_differences_in_each_parameter():
+    """Ė = -d·F, and each term's share through its parameter: -d·∂F/∂θ by central differences of shells built at
+    θ ± δ (Y, h scale the elastic terms as Y h, Y h³; the shell's penalty is a number of its own here; AC and AI move
+    the reference)."""
+    mesh, rng = icosphere(1.0, level=1), np.random.default_rng(5)
+    moduli = {"thickness": 0.05, "young": 3.0, "AC": 0.3, "AI": 0.7, "volume_penalty": 5.0}
+    x = mesh.vertices + 0.02 * rng.standard_normal(mesh.vertices.shape)
+    c, direction = rng.uniform(0.0, 1.0, len(x)), rng.standard_normal(x.shape)
+    shell = Shell(mesh, dtype="float64", device="cpu", **moduli)
+    rates = wp.zeros(1, dtype=ShellRates)
+    shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), rates)
+    stretching, bending, volume, metric, curvature = rates.numpy()[0]
+    forces = direction_dot_forces(mesh, x, c, direction, **moduli)
+    assert stretching + bending + volume == pytest.approx(-forces, rel=1e-12)
+    expected = {"thickness": (stretching + 3 * bending) / moduli["thickness"], "AC": metric, "AI": curvature,
+                "young": (stretching + bending) / moduli["young"], "volume_penalty": volume / moduli["volume_penalty"]}
+    for name, rate in expected.items():
+        delta = 1e-5 * moduli[name]
+        ends = [direction_dot_forces(mesh, x, c, direction, **{**moduli, name: moduli[name] + sign * delta})
+                for sign in (1.0, -1.0)]  # fmt: skip
+        assert -rate == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-6), name
 
 
 def test_the_forward_walk_replays_the_runs_coupled_steps_bitwise(half_period):

@@ -9,9 +9,11 @@ displacement along the wave in R from the walk's start to its end. One pass back
 
 Per mechanics substep, backwards: ŵ = v̂' + dt x̂', F̂ = ŵ/(ζM); the shell's x̂ += (∂F/∂x)ᵀF̂ = -H F̂ (H symmetric:
 the central difference of the forces along F̂); the ground's law at the limit points is differentiated by hand
-(kernels/adjoint.py) and reaches x̂, v̂ through Lᵀ; the parameters: Y scales F, h scales the stretching once and the
-bending thrice, μV the volume term, AC and AI by central differences of F̂ · F. The rigid-body correction of the
-forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque of F vanish at every x.
+(kernels/adjoint.py) and reaches x̂, v̂ through Lᵀ; the shell's parameters by F̂ · ∂F/∂θ = -∂Ė/∂θ, Ė the energy's
+rate of change along F̂, whose terms one pass over the quadrature points gives with their derivatives in AC and AI
+(Y scales every term, h the stretching and volume once and the bending thrice, μV the volume term). The rigid-body
+correction of the forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque of F vanish
+at every x.
 
 The whole run: back through the settling too, replayed from the placement (its overdamped phase by the same
 adjoint, its inertial phase by symplectic Euler's with the damping toward the rigid-body motion) and the placement's
@@ -37,6 +39,7 @@ from .device import run_steps
 from .dynamics import InertialSolver
 from .geometry import limit_positions, limit_surface
 from .kernels.adjoint import (
+    ShellRates,
     eval_area_scale,
     eval_count,
     eval_damping_adjoint,
@@ -45,12 +48,12 @@ from .kernels.adjoint import (
     eval_pull,
     eval_push,
     eval_scaled_inverse_mass,
+    eval_shell_parameter_gradient,
     eval_step_adjoint,
     eval_weighted_dot,
 )
 from .kernels.contact import ground_motion, spread_to_control_points
 from .kernels.dynamics import eval_reference_ramp
-from .shell import KoiterReference
 from .walker_gradients import WalkerGradientError
 
 SHELL_PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v")
@@ -60,7 +63,18 @@ SETTLE_FREE = ("AC", "AI")  # the walk's start (settled at c = 0) does not depen
 ACTION_STEP = 1e-4  # the Hessian action's central difference, in mean edges along the direction's largest component (1e-5: round-off)
 MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
            kernels.reduce, kernels.adjoint)  # what a walk and its adjoint launch (loaded before a capture)
-COUPLING_STEP = 1e-5  # AC, AI: relative central differences of F̂ · F (absolute where the coupling is 0)
+
+
+def rate_factors(p) -> np.ndarray:
+    """Rows AC, AI, h, Y, μV (SHELL_PARAMETERS' slots) of ∂Ė/∂θ's weights on `Shell.rates_device`'s (Ė_S, Ė_B, Ė_V,
+    ∂/∂AC, ∂/∂AI): the stretching modulus and the volume penalty go as Y h, the bending modulus as Y h³, the penalty
+    as μV."""
+    factors = np.zeros((len(SHELL_PARAMETERS), 5))
+    factors[0, 3] = factors[1, 4] = 1.0
+    factors[2, :3] = np.array([1.0, 3.0, 1.0]) / p.thickness
+    factors[3, :3] = 1.0 / p.young
+    factors[4, 2] = 1.0 / p.mu_v if p.mu_v else 0.0
+    return factors
 
 
 def check_adjoint_walk(p, wrt) -> None:
@@ -126,7 +140,7 @@ class WalkAdjoint:
         with wp.ScopedDevice(shell.device):
             self._seed = wp.array(seed, dtype=shell.vec3)
             self._scratch = {name: wp.zeros(n, dtype=shell.vec3) for name in
-                             ("x_hat", "v_hat", "w_hat", "force_hat", "probe", "plus", "minus", "forces", "term",
+                             ("x_hat", "v_hat", "w_hat", "force_hat", "probe", "plus", "minus",
                               "x", "v", "v_next", "v_star", "a_ctrl", "v_star_hat")}  # fmt: skip
             points = self.solver.ground_points  # the ground's: limit points, or quadrature points (area contact)
             self._points = {name: wp.zeros(points, dtype=shell.vec3) for name in
@@ -140,10 +154,8 @@ class WalkAdjoint:
             self._shell_gradient = wp.zeros(len(SHELL_PARAMETERS) + 1, dtype=wp.float64)  # + drag
             self._ground_gradient = wp.zeros(len(GROUND_PARAMETERS), dtype=wp.float64)
             self._c_ramp = wp.empty_like(self.wave.c)
-            self._unit = shell.world_arrays(np.ones(1))[0]
-            self._zero = shell.world_arrays(np.zeros(1))[0]
-            self._unit_penalty = wp.ones(1, dtype=wp.float64)
-            self._zero_penalty = wp.zeros(1, dtype=wp.float64)
+            self._rates = wp.zeros(1, dtype=ShellRates)
+            self._factors = wp.array(rate_factors(run.p), dtype=wp.float64)
             self._mass = wp.array(self.dynamics.mass, dtype=wp.float64)
             self._damping_sums = wp.zeros(3, dtype=wp.vec3d)
             self._damping_moment = wp.zeros(1, dtype=wp.mat33d)
@@ -155,17 +167,6 @@ class WalkAdjoint:
         if self.solver.implicit:
             self._contact_of(self.solver)
         self._xs = self._vs = self._cs = None  # the stretch's stored rows, allocated by `gradient`
-        self._couplings = {}
-        for index, name in enumerate(("AC", "AI")):
-            if name in self.wrt:
-                theta = float(getattr(run.p, name))
-                delta = COUPLING_STEP * (abs(theta) or 1.0)
-                pair = []
-                for sign in (1.0, -1.0):
-                    values = [shell.AC, shell.AI]
-                    values[index] = theta + sign * delta
-                    pair.append(KoiterReference(shell.world_arrays(*values)))
-                self._couplings[name] = (pair, delta)
 
     # ---------------------------------------------------------------- the forward walk
     def _state_arrays(self) -> list:
@@ -317,11 +318,11 @@ class WalkAdjoint:
 
     def _substep_adjoint(self, x, v, v_next) -> None:
         """x̂, v̂ (after a walk's substep) → before it, and the parameters' gradients (module docstring)."""
-        self._step_adjoint(self.solver, x, v, v_next, self.dynamics.dt, couplings=True)
+        self._step_adjoint(self.solver, x, v, v_next, self.dynamics.dt)
 
-    def _step_adjoint(self, solver, x, v, v_next, dt: float, couplings: bool) -> None:
+    def _step_adjoint(self, solver, x, v, v_next, dt: float) -> None:
         """One step of `solver` (the overdamped walk's, or the settling's inertial one) backwards: x̂, v̂ after it →
-        before it. `couplings`: AC and AI too (not while settling, at c = 0)."""
+        before it."""
         overdamped = solver is self.solver
         if solver.implicit:
             self._implicit_adjoint(solver, x, v, dt, overdamped)
@@ -329,7 +330,7 @@ class WalkAdjoint:
             self._overdamped_adjoint(x, v_next, dt)
         else:
             self._inertial_adjoint(solver, x, v, dt)
-        self._shell_adjoint(x, couplings)
+        self._shell_adjoint(x)
         if not solver.implicit:
             self._explicit_ground_adjoint(x, v)
 
@@ -389,32 +390,16 @@ class WalkAdjoint:
         eval_damping_adjoint(w_hat, x, v, self._mass, solver.rigid_motion(x, v), solver.total_mass, dt * solver.damping,
                              self._damping_sums, self._damping_moment, s["x_hat"], s["v_hat"])
 
-    def _shell_adjoint(self, x, couplings: bool) -> None:
-        """F̂ (the step's force adjoint) back to x̂ through the shell (-H F̂) and to its parameters; `couplings`: AC and
-        AI too."""
-        s, shell, p = self._scratch, self.shell, self.run.p
+    def _shell_adjoint(self, x) -> None:
+        """F̂ (the step's force adjoint) back to x̂ through the shell (-H F̂) and to its parameters (F̂ · ∂F/∂θ =
+        -∂Ė/∂θ, Ė the energy's rate of change as x moves along F̂: `Shell.rates_device`)."""
+        s, shell = self._scratch, self.shell
         force_hat, gradient = s["force_hat"], self._shell_gradient
         eval_directional_derivative(x, force_hat, ACTION_STEP * shell.edge_length, shell.forces_device, self._largest,
                                     s["probe"], s["plus"], s["minus"], s["x_hat"])  # fmt: skip
-        if "young" in self.wrt or "thickness" in self.wrt:
-            shell.forces_device(x, s["forces"])
-            for name, theta in (("young", p.young), ("thickness", p.thickness)):
-                if name in self.wrt:
-                    eval_weighted_dot(force_hat, s["forces"], 1.0 / theta, SHELL_PARAMETERS.index(name), gradient)
-        if "thickness" in self.wrt:  # the bending modulus Y h³/(24(1 - ν²)) once more, twice: 2b/h F_b
-            shell.term_forces_device(x, s["term"], self._zero, self._unit, self._zero_penalty)
-            eval_weighted_dot(force_hat, s["term"], 2.0 * shell.moduli[1] / p.thickness,
-                              SHELL_PARAMETERS.index("thickness"), gradient)  # fmt: skip
-        if "mu_v" in self.wrt:  # the penalty μV Y h / size⁴ is linear in μV
-            shell.term_forces_device(x, s["term"], self._zero, self._zero, self._unit_penalty)
-            eval_weighted_dot(force_hat, s["term"], shell.volume_penalty / p.mu_v, SHELL_PARAMETERS.index("mu_v"),
-                              gradient)  # fmt: skip
-        for name, (pair, delta) in self._couplings.items() if couplings else ():
-            for sign, reference in zip((1.0, -1.0), pair):
-                reference.launch(shell, shell.reference_c)
-                shell.forces_device(x, s["forces"])
-                eval_weighted_dot(force_hat, s["forces"], sign / (2.0 * delta), SHELL_PARAMETERS.index(name), gradient)
-            shell.reference.launch(shell, shell.reference_c)
+        if any(name in SHELL_PARAMETERS for name in self.wrt):
+            shell.rates_device(x, force_hat, self._rates)
+            eval_shell_parameter_gradient(self._rates, self._factors, gradient)
 
     def _explicit_ground_adjoint(self, x, v) -> None:
         """F̂ back to x̂, v̂ through the explicit ground law at the limit points (Lᵀ of its adjoint), and to its
@@ -518,7 +503,7 @@ class WalkAdjoint:
             eval_pull(self._xs, counter, 0, s["x"])
             eval_pull(self._vs, counter, 0, s["v"])
             eval_pull(self._vs, counter, 1, s["v_next"])
-            self._step_adjoint(solver, s["x"], s["v"], s["v_next"], dt, couplings=False)
+            self._step_adjoint(solver, s["x"], s["v"], s["v_next"], dt)
 
         self._run(recompute, count, ("settle recompute", id(solver)), 1)
         eval_push(state.x, counter, self._xs)

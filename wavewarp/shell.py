@@ -22,6 +22,7 @@ import warp as wp
 from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
+from .kernels.adjoint import eval_shell_rates
 from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
@@ -348,11 +349,14 @@ class Shell:
             penalty = wp.full(self.worlds, 0.5, dtype=wp.float64)
         self._force_terms(x, gradient, None, (zero, zero), target, penalty, True, contact=False)
 
-    def term_forces_device(self, x: wp.array, forces: wp.array, stretching: wp.array, bending: wp.array,
-                           volume_penalty: wp.array) -> None:  # fmt: skip
-        """forces = -∂E/∂x with the stretching and bending moduli and the volume penalty given (per-world device
-        arrays; the penalty float64) at the current reference: one term at unit weight (wavewarp/adjoint.py)."""
-        self._force_terms(x, forces, None, (stretching, bending), self._target, volume_penalty, True, contact=False)
+    def rates_device(self, x: wp.array, direction: wp.array, rates: wp.array) -> None:
+        """rates[0] = (Ė_S, Ė_B, Ė_V, ∂(Ė_S + Ė_B)/∂AC, ∂(Ė_S + Ė_B)/∂AI) as x moves along `direction`, at the current
+        reference (one world; kernels/adjoint.py `shell_rates_kernel`): the shell's parameters' share of a gradient."""
+        if self.has_volume:
+            self._launch_volume(x, differentiable=False)
+        eval_shell_rates(x, direction, self.reference_c, self.tables.weighted_patch(), self.reference_arrays(),
+                         self.rest_curvature, list(self._moduli), self.poisson, [self._moments, self._target,
+                                                                                 self._penalty], rates)  # fmt: skip
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
