@@ -1,12 +1,12 @@
-"""Adjoint kernels of the walkers' overdamped step (docs/theory/gradients.md, "Reverse mode"), each with its
-launcher. One world; the accumulators (norms, parameter gradients) are float64 and summed atomically."""
+"""Adjoint kernels of the walkers' overdamped step and shell (docs/theory/gradients.md, "Reverse mode"), each with its
+launcher (the ground laws': kernels/adjoint_contact.py). One world; the accumulators (norms, parameter gradients) are
+float64 and summed atomically."""
 
 from typing import Any
 
 import warp as wp
 
 from . import declare_overloads, scalar_of
-from .contact import slip_speed as slip_root
 from .limit_surface import basis_row, patch_jet, patch_scalar
 from .reduce import REDUCTION_BLOCK, block_add
 from .shell import VolumeMoments, koiter_jet, material_stress, volume_centroid_force, world_volume_terms
@@ -133,51 +133,6 @@ def add_vectors_kernel(part: wp.array(dtype=Any), total: wp.array(dtype=Any)):
     total[i] = total[i] + part[i]
 
 
-@wp.func
-def friction_factor(speed: Any, k_f: Any):
-    """(φ, φ'/s) of φ(s) = tanh(k_f s)/s, by its series where k_f s is small (φ → k_f, φ'/s → -2k_f³/3)."""
-    ks = k_f * speed
-    if ks < type(ks)(1e-4):
-        return k_f * (type(ks)(1.0) - ks * ks / type(ks)(3.0)), type(ks)(-2.0 / 3.0) * k_f * k_f * k_f
-    t = wp.tanh(ks)
-    phi = t / speed
-    return phi, (k_f * (type(ks)(1.0) - t * t) - phi) / (speed * speed)
-
-
-@wp.kernel
-def ground_adjoint_kernel(
-    p: wp.array(dtype=Any), u: wp.array(dtype=Any), force_hat: wp.array(dtype=Any), k: Any, beta: Any, mu: Any,
-    k_f: Any, p_hat: wp.array(dtype=Any), u_hat: wp.array(dtype=Any), gradient: wp.array(dtype=wp.float64),
-):  # fmt: skip
-    """Adjoint of the explicit ground law at a limit point (kernels/contact.py: F_n = max(k z² - β u_z, 0) where z ≤ 0,
-    F_f = -μ F_n φ(|u_t|) u_t with φ(s) = tanh(k_f s)/s), given f̂ = L F̂: p̂, û (overwritten) and
-    gradient[0..3] += ∂/∂(k, β, μ, k_f) of f̂ · f."""
-    i = wp.tid()
-    a = force_hat[i]
-    z = p[i][2]
-    zero = type(z)(0.0)
-    fn = k * z * z - beta * u[i][2]
-    p_hat[i] = type(a)()
-    u_hat[i] = type(a)()
-    if z > zero or fn < zero:
-        return
-    u_t = type(a)(u[i][0], u[i][1], zero)
-    a_t = type(a)(a[0], a[1], zero)
-    phi, slope = friction_factor(wp.length(u_t), k_f)
-    load = wp.dot(a_t, u_t)
-    fn_hat = a[2] - mu * phi * load
-    u_hat_t = -(mu * fn) * (phi * a_t + (slope * load) * u_t)
-    speed = wp.length(u_t)
-    ks = k_f * speed
-    sech2 = type(z)(1.0) - wp.tanh(ks) * wp.tanh(ks)
-    p_hat[i] = type(a)(zero, zero, type(z)(2.0) * k * z * fn_hat)
-    u_hat[i] = u_hat_t + type(a)(zero, zero, -beta * fn_hat)
-    wp.atomic_add(gradient, 0, wp.float64(fn_hat * z * z))
-    wp.atomic_add(gradient, 1, wp.float64(-fn_hat * u[i][2]))
-    wp.atomic_add(gradient, 2, wp.float64(-fn * phi * load))
-    wp.atomic_add(gradient, 3, wp.float64(-mu * fn * sech2 * load))
-
-
 @wp.kernel
 def push_vectors_kernel(source: wp.array(dtype=wp.vec3d), counter: wp.array(dtype=wp.int32),
                         store: wp.array2d(dtype=wp.vec3d)):  # fmt: skip
@@ -215,79 +170,6 @@ def pull_scalars_kernel(store: wp.array2d(dtype=wp.float64), counter: wp.array(d
 def count_kernel(counter: wp.array(dtype=wp.int32), by: int):
     """counter[0] += by (one thread)."""
     counter[0] = counter[0] + by
-
-
-@wp.kernel
-def implicit_law_adjoint_kernel(
-    p: wp.array(dtype=wp.vec3d), u: wp.array(dtype=wp.vec3d), response: wp.array(dtype=wp.float64),
-    scale: wp.float64, dt: wp.float64, k: wp.float64, beta: wp.float64, mu: wp.float64, k_f: wp.float64,
-    force_hat: wp.array(dtype=wp.vec3d), u_hat: wp.array(dtype=wp.vec3d), p_hat: wp.array(dtype=wp.vec3d),
-    gradient: wp.array(dtype=wp.float64),
-):  # fmt: skip
-    """Adjoint of the implicit ground law at a point (kernels/contact.py `implicit_contact_kernel`, the lab frame):
-    f(z, u; r) with r = scale × response, F_n = max((kz² - β'u_z)/(1 + β'r), 0), β' = β - 2kz dt, friction
-    -|f_t| u_t/|u_t| with |f_t| = min(μF_n, |u_t|/r) (Coulomb, k_f = ∞) or μF_n tanh(k_f s), s + rμF_n tanh(k_f s)
-    = |u_t| (differentiated implicitly). Given f̂: u_hat = û (overwritten), p_hat += (0, 0, ẑ), gradient[0..3] +=
-    ∂/∂(k, β, μ, k_f) and gradient[4] += ∂/∂scale of f̂ · f. One float64 world."""
-    i = wp.tid()
-    a = force_hat[i]
-    z = p[i][2]
-    zero = wp.float64(0.0)
-    one = wp.float64(1.0)
-    r = scale * response[i]
-    damping = beta - wp.float64(2.0) * k * z * dt
-    denominator = one + damping * r
-    fn = (k * z * z - damping * u[i][2]) / denominator
-    u_hat[i] = wp.vec3d()
-    if z > zero or fn < zero:
-        return
-    fn_hat = a[2]
-    r_hat = zero
-    v_t = wp.vec3d(u[i][0], u[i][1], zero)
-    speed = wp.length(v_t)
-    u_t_hat = wp.vec3d()
-    if speed > zero and fn > zero:
-        d = v_t / speed
-        cap = mu * fn
-        a_t = wp.vec3d(a[0], a[1], zero)
-        a_slip = r * cap
-        s = zero
-        th = zero
-        magnitude = wp.min(cap, speed / r)
-        if not wp.isinf(k_f):
-            s = wp.min(slip_root(speed, a_slip, k_f), speed)
-            th = wp.tanh(k_f * s)
-            magnitude = cap * th
-        magnitude_hat = -wp.dot(a_t, d)
-        u_t_hat = -(magnitude / speed) * (a_t - wp.dot(a_t, d) * d)
-        cap_hat = zero
-        speed_hat = zero
-        if wp.isinf(k_f):
-            if cap < speed / r:
-                cap_hat = magnitude_hat
-            else:
-                speed_hat = magnitude_hat / r
-                r_hat = -magnitude_hat * speed / (r * r)
-        else:
-            sech2 = one - th * th
-            slope = one + a_slip * k_f * sech2  # ∂/∂s of s + a tanh(k_f s)
-            s_hat = magnitude_hat * cap * k_f * sech2
-            speed_hat = s_hat / slope
-            slip_hat = -s_hat * th / slope  # ∂s/∂a
-            cap_hat = magnitude_hat * th + slip_hat * r
-            r_hat = slip_hat * cap
-            wp.atomic_add(gradient, 3, magnitude_hat * cap * s * sech2 - s_hat * a_slip * s * sech2 / slope)
-        u_t_hat = u_t_hat + speed_hat * d
-        fn_hat = fn_hat + mu * cap_hat
-        wp.atomic_add(gradient, 2, fn * cap_hat)
-    damping_hat = -fn_hat * (u[i][2] + fn * r) / denominator
-    u_hat[i] = u_t_hat + wp.vec3d(zero, zero, -fn_hat * damping / denominator)
-    p_hat[i] = p_hat[i] + wp.vec3d(zero, zero, fn_hat * wp.float64(2.0) * k * z / denominator
-                                  - damping_hat * wp.float64(2.0) * k * dt)  # fmt: skip
-    r_hat = r_hat - fn_hat * fn * damping / denominator
-    wp.atomic_add(gradient, 0, fn_hat * z * z / denominator - damping_hat * wp.float64(2.0) * z * dt)
-    wp.atomic_add(gradient, 1, damping_hat)
-    wp.atomic_add(gradient, 4, r_hat * response[i])
 
 
 @wp.func
@@ -387,8 +269,7 @@ declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
 declare_overloads(shell_rates_kernel, x="vec3[]", direction="vec3[]", c="scalar[]", basis="vec6[,]", weights="scalar[]",
                   ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]",
                   rest_curvature="mat22[]", stretching_modulus="scalar[]", bending_modulus="scalar[]", nu="scalar")
-declare_overloads(ground_adjoint_kernel, p="vec3[]", u="vec3[]", force_hat="vec3[]", k="scalar", beta="scalar",
-                  mu="scalar", k_f="scalar", p_hat="vec3[]", u_hat="vec3[]")  # fmt: skip
+
 
 
 # ---------------------------------------------------------------- launchers
@@ -470,29 +351,6 @@ def eval_scaled_inverse_mass(w, inverse_mass, scale: float, out) -> None:
     """out = scale w / M."""
     wp.launch(scaled_inverse_mass_kernel, dim=len(w), inputs=[w, inverse_mass, scalar_of(inverse_mass)(scale)],
               outputs=[out], device=w.device)  # fmt: skip
-
-
-def implicit_laws(ground, scale: float, dt: float) -> list:
-    """The implicit ground law's launch arguments after the points' arrays (float64): scale, dt, k, β, μ, k_f."""
-    return [wp.float64(value) for value in (scale, dt, ground.stiffness, ground.damping, ground.friction,
-                                            ground.sharpness)]  # fmt: skip
-
-
-def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, force_hat, u_hat, p_hat,
-                              gradient) -> None:  # fmt: skip
-    """û (overwritten) and p̂ += ẑ of the implicit ground law at every point given f̂; gradient[0..4] += ∂/∂(k, β, μ,
-    k_f, scale) (`implicit_law_adjoint_kernel`)."""
-    wp.launch(implicit_law_adjoint_kernel, dim=len(p), inputs=[p, u, response, *implicit_laws(ground, scale, dt),
-                                                               force_hat],
-              outputs=[u_hat, p_hat, gradient], device=p.device)  # fmt: skip
-
-
-def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None:
-    """p̂, û of the explicit ground law at the limit points, and its parameters' gradient[0..3] (k, β, μ, k_f)."""
-    s = scalar_of(p_hat)
-    wp.launch(ground_adjoint_kernel, dim=len(p), inputs=[p, u, force_hat, s(ground.stiffness), s(ground.damping),
-                                                         s(ground.friction), s(ground.sharpness)],
-              outputs=[p_hat, u_hat, gradient], device=p.device)  # fmt: skip
 
 
 def eval_shell_rates(x, direction, c, patch: list, reference: list, rest_curvature, moduli: list, nu, volume: list,

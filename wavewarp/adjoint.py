@@ -2,8 +2,9 @@
 
 The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the contact on the limit points or
 per area, explicit with a smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the
-scenes' default: its adjoint in wavewarp/adjoint_contact.py), the Koiter shell, the insensitive wave (the chemistry does not see the
-shape: c(t) is data for the mechanics), one world, float64. The objective is the walk's J, the centre of mass's
+scenes' default: its adjoint in wavewarp/adjoint_contact.py) with the drag in the lab or the body frame, the Koiter
+shell, the insensitive wave (the chemistry does not see the shape: c(t) is data for the mechanics), one world,
+float64. The objective is the walk's J, the centre of mass's
 displacement along the wave in R from the walk's start to its end. One pass back gives dJ/dθ for every parameter of
 `ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
 
@@ -44,7 +45,6 @@ from .kernels.adjoint import (
     eval_count,
     eval_damping_adjoint,
     eval_directional_derivative,
-    eval_ground_adjoint,
     eval_pull,
     eval_push,
     eval_scaled_inverse_mass,
@@ -52,17 +52,18 @@ from .kernels.adjoint import (
     eval_step_adjoint,
     eval_weighted_dot,
 )
+from .kernels.adjoint_contact import eval_ground_adjoint
 from .kernels.contact import ground_motion, spread_to_control_points
 from .kernels.dynamics import eval_reference_ramp
 from .walker_gradients import WalkerGradientError
 
 SHELL_PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v")
-GROUND_PARAMETERS = ("stiffness", "contact_damping", "friction", "sharpness")  # the order of kernels/adjoint.py's slots
+GROUND_PARAMETERS = ("stiffness", "contact_damping", "friction", "sharpness")  # kernels/adjoint_contact.py's slots
 ADJOINT_PARAMETERS = SHELL_PARAMETERS + GROUND_PARAMETERS + ("drag",)
 SETTLE_FREE = ("AC", "AI")  # the walk's start (settled at c = 0) does not depend on them
 ACTION_STEP = 1e-4  # the Hessian action's central difference, in mean edges along the direction's largest component (1e-5: round-off)
 MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
-           kernels.reduce, kernels.adjoint)  # what a walk and its adjoint launch (loaded before a capture)
+           kernels.reduce, kernels.adjoint, kernels.adjoint_contact)  # what a walk and its adjoint launch
 
 
 def rate_factors(p) -> np.ndarray:
@@ -86,8 +87,7 @@ def check_adjoint_walk(p, wrt) -> None:
                                   f"{', '.join(ADJOINT_PARAMETERS)} (central differences take the rest: --method "
                                   "differences)")  # fmt: skip
     needs = [(p.sensitive, "sensitive=false (the wave on the rest shell: the chemistry's adjoint is not built)"),
-             (p.mechanics != "overdamped", "mechanics=overdamped"),
-             (p.drag_frame != "lab", "drag_frame=lab")]  # fmt: skip
+             (p.mechanics != "overdamped", "mechanics=overdamped")]  # fmt: skip
     missing = [fix for needed, fix in needs if needed]
     if missing:
         raise WalkerGradientError("the reverse mode covers the overdamped walk with the "
@@ -353,7 +353,7 @@ class WalkAdjoint:
         pts = self._points
         self._gather(solver, s["a_ctrl"], pts["a"], weighted=True)
         pts["p_hat"].zero_()
-        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"])
+        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"], s["w_hat"])
         wp.copy(s["v_star_hat"], s["w_hat"])
         self._spread(solver, pts["u_star_hat"], s["v_star_hat"])
         self._spread(solver, pts["p_hat"], s["x_hat"])

@@ -1,20 +1,36 @@
 """The implicit contact's adjoint (docs/theory/gradients.md, "Reverse mode"): the per-point solve and its Jacobi
-sweeps (kernels/contact.py `eval_implicit_ground`, the lab frame), on the limit points (point contact) or the limit
-surface's quadrature points (area contact), run again at a substep and then taken backwards.
+sweeps (kernels/contact.py `eval_implicit_ground`), on the limit points (point contact) or the limit surface's
+quadrature points (area contact), with the drag in the lab frame or the body frame, run again at a substep and then
+taken backwards.
 
 With G the points' gather from the control points (L, or the quadrature basis N) and S = Gᵀ weighted by each point's
 area a (1 on limit points): forward, the responses r = scale × G M⁻¹ S 1_contact (piecewise constant in x, no
 derivative), f⁰ = law(p, u*, r), and each sweep f^s = law(p, o^s, r) with o^s = u* + scale (G M⁻¹ S - r) f^(s-1).
 Backward, given f̂ of the final forces: each sweep's law adjoint gives ô^s, ẑ and the parameters'; û* += ô^s and
 f̂^(s-1) = scale (Sᵀ M⁻¹ Gᵀ - r) ô^s; the first law's adjoint gives û* its last share.
+
+The body frame: before each pass's law the world's horizontal body velocity U takes a few Weiszfeld steps U' = U +
+G(U)/h(U) (from 0 in the first pass, from the last pass's U in each sweep), the law sees the slip velocity o + U, and
+every control point moves with the final U. Backward: Û starts as Σ_I ŵ_I (horizontal), each law's adjoint adds its
+points' horizontal ô, and each step, taken back from its stored U, gives its points' share through Ĝ = Û'/h and
+ĥ = -Û'·G/h² and adds their horizontal part to Û (kernels/adjoint_contact.py).
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_implicit_law_adjoint, eval_weighted_dot, implicit_laws
+from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_weighted_dot
+from .kernels.adjoint_contact import (
+    eval_body_step_adjoint,
+    eval_horizontal_sum,
+    eval_implicit_law_adjoint,
+    implicit_laws,
+)
 from .kernels.contact import (
+    add_body_velocity_kernel,
+    body_friction_sums_kernel,
+    body_velocity_kernel,
     contact_indicator_kernel,
     ground_motion,
     implicit_contact_kernel,
@@ -24,12 +40,13 @@ from .kernels.contact import (
     quadrature_response_kernel,
     spread_to_control_points,
 )
+from .kernels.reduce import REDUCTION_BLOCK
 
 
 class ImplicitContactAdjoint:
-    """The implicit contact of `solver` (an InertialSolver or OverdampedSolver with Ground(solve="implicit"), the lab
-    frame, one world, float64): `forward(x, v_star, scale, dt)` solves it again storing every sweep,
-    `backward(force_hat, ...)` takes it back."""
+    """The implicit contact of `solver` (an InertialSolver or OverdampedSolver with Ground(solve="implicit"), the drag
+    in the lab or the body frame, one world, float64): `forward(x, v_star, scale, dt)` solves it again storing every
+    sweep (and every body velocity), `backward(force_hat, ...)` takes it back."""
 
     def __init__(self, solver):
         self.solver, self.ground, self.mask = solver, solver.ground, solver.mask
@@ -50,6 +67,15 @@ class ImplicitContactAdjoint:
             self.forces = [wp.zeros(n, dtype=wp.vec3d) for _ in range(sweeps + 1)]  # f^0 … f^S
             self.others = [wp.zeros(n, dtype=wp.vec3d) for _ in range(sweeps + 1)]  # o^1 … o^S (o^0 = u*)
             self.o_hat, self.f_hat, self.gathered = (wp.zeros(n, dtype=wp.vec3d) for _ in range(3))
+        self.frame = solver.body  # kernels/contact.py BodyFrame
+        if self.frame.solve:
+            first, later = self.frame.iterations
+            with wp.ScopedDevice(solver.device):  # each pass's body velocities U_0 … U_K, its sums and seeds
+                counts = [first] + [later] * sweeps
+                self.iterates = [[wp.zeros(1, dtype=wp.vec3d) for _ in range(count + 1)] for count in counts]
+                self.sums = [wp.zeros(1, dtype=wp.vec3d), wp.zeros(1, dtype=wp.float64)]
+                self.seeds = [wp.zeros(1, dtype=wp.vec3d), wp.zeros(1, dtype=wp.float64)]
+                self.body_hat, self.slip = wp.zeros(1, dtype=wp.vec3d), wp.zeros(n, dtype=wp.vec3d)
 
     def _coupled(self, forces, predictor, response, area, scale: float, out) -> None:
         """out = predictor + scale (G M⁻¹ S_area forces - response forces) (the sweep's velocity without the point's
@@ -78,22 +104,68 @@ class ImplicitContactAdjoint:
             if s > 0:
                 self._coupled(self.forces[s - 1], self.u_star, self.response, self.area, scale, self.others[s])
                 velocities = self.others[s]
-            wp.launch(implicit_contact_kernel, dim=n, inputs=[self.p, velocities, self.response, *laws, self.body],
+            body = self._solve_body(s, velocities, laws) if self.frame.solve else self.body
+            wp.launch(implicit_contact_kernel, dim=n, inputs=[self.p, velocities, self.response, *laws, body],
                       outputs=[self.normal, self.forces[s]], device=device)  # fmt: skip
 
-    def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat) -> None:
-        """Given f̂ of the final forces at the points: u_star_hat = û* (overwritten), p_hat += ẑ, and `gradient` +=
-        ∂/∂(k, β, μ, k_f, scale) of f̂ · f, the final velocity's share of scale included."""
-        gradient = self.gradient
+    def _sums(self, velocities, body, laws) -> None:
+        """self.sums = the net friction Σ a f_t and the stiffness Σ a |f_t|/|y| at body velocity `body`."""
+        for total in self.sums:
+            total.zero_()
+        frame = self.frame
+        wp.launch(body_friction_sums_kernel, dim=frame.threads,
+                  inputs=[self.p, velocities, self.response, frame.weight, *laws, body, frame.threads],
+                  outputs=self.sums, block_dim=REDUCTION_BLOCK, device=self.p.device)  # fmt: skip
+
+    def _solve_body(self, s: int, velocities, laws):
+        """Pass s's Weiszfeld steps of U (kernels/contact.py `solve_body_velocity`), every iterate kept; the last."""
+        iterates = self.iterates[s]
+        if s == 0:
+            iterates[0].zero_()
+        else:
+            wp.copy(iterates[0], self.iterates[s - 1][-1])
+        for step in range(len(iterates) - 1):
+            wp.copy(iterates[step + 1], iterates[step])
+            self._sums(velocities, iterates[step], laws)
+            wp.launch(body_velocity_kernel, dim=1, inputs=[*self.sums, self.frame.external],
+                      outputs=[iterates[step + 1]], device=self.p.device)  # fmt: skip
+        return iterates[-1]
+
+    def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat, velocity_hat) -> None:
+        """Given f̂ of the final forces at the points and ŵ (`velocity_hat`) of the control points' final velocities:
+        u_star_hat = û* (overwritten), p_hat += ẑ, and `gradient` += ∂/∂(k, β, μ, k_f, scale) of f̂ · f, the final
+        velocity's share of scale included (and, in the body frame, U's: every control point moves with it)."""
+        gradient, laws = self.gradient, implicit_laws(self.ground, scale, dt)
         eval_weighted_dot(force_hat, self.forces[-1], 1.0 / scale, 4, gradient)  # v = v* + scale M⁻¹ S f
         wp.copy(self.f_hat, force_hat)
         u_star_hat.zero_()
+        if self.frame.solve:
+            self.body_hat.zero_()
+            eval_horizontal_sum(velocity_hat, self.body_hat)
         for s in reversed(range(len(self.forces))):
-            velocity = self.u_star if s == 0 else self.others[s]
-            eval_implicit_law_adjoint(self.ground, self.p, velocity, self.response, scale, dt, self.f_hat, self.o_hat,
+            velocity = slip = self.u_star if s == 0 else self.others[s]
+            if self.frame.solve:  # the law saw o + U
+                wp.copy(self.slip, velocity)
+                wp.launch(add_body_velocity_kernel, dim=len(slip), inputs=[self.iterates[s][-1]], outputs=[self.slip],
+                          device=slip.device)  # fmt: skip
+                slip = self.slip
+            eval_implicit_law_adjoint(self.ground, self.p, slip, self.response, scale, dt, self.f_hat, self.o_hat,
                                       p_hat, gradient)  # fmt: skip
+            if self.frame.solve:
+                self._body_backward(s, velocity, scale, dt, laws, p_hat)
             eval_add(u_star_hat, self.o_hat)
             if s > 0:  # o^s = u* + scale (G M⁻¹ S - r) f^(s-1): f̂^(s-1), then ∂/∂scale
                 self._coupled(self.o_hat, self.zeros, self.no_response, self.ones, scale, self.gathered)
                 eval_coupling_transpose(self.gathered, self.area, self.response, scale, self.o_hat, self.f_hat)
                 eval_weighted_dot(self.f_hat, self.forces[s - 1], 1.0 / scale, 4, gradient)
+
+    def _body_backward(self, s: int, velocities, scale: float, dt: float, laws, p_hat) -> None:
+        """Pass s's body velocity backwards: Û += the law's horizontal ô, then its Weiszfeld steps, last first, each
+        adding its points' share to ô and Û (Û is then the adjoint of the pass's starting U, the last pass's)."""
+        eval_horizontal_sum(self.o_hat, self.body_hat)
+        iterates = self.iterates[s]
+        for step in reversed(range(len(iterates) - 1)):
+            self._sums(velocities, iterates[step], laws)
+            eval_body_step_adjoint(self.ground, self.p, velocities, iterates[step], self.response, self.frame.weight,
+                                   scale, dt, self.sums, self.frame.external, self.seeds, self.o_hat, p_hat,
+                                   self.gradient, self.body_hat)  # fmt: skip
