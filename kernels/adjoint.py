@@ -202,20 +202,24 @@ def shell_rates_kernel(
     ref_metric_inv: wp.array(dtype=Any),
     ref_curvature: wp.array(dtype=Any),
     ref_weight: wp.array(dtype=Any),
+    rest_metric: wp.array(dtype=Any),
     rest_curvature: wp.array(dtype=Any),
     stretching_modulus: wp.array(dtype=Any),
     bending_modulus: wp.array(dtype=Any),
     nu: Any,
+    AC: Any,
+    bilayer_radius: Any,
     moments: wp.array(dtype=VolumeMoments),
     target: wp.array(dtype=wp.float64),
     penalty: wp.array(dtype=wp.float64),
     rates: wp.array(dtype=ShellRates),
 ):
     """rates[0] += the rates of change of E_S, E_B and E_V as x moves along d, and the derivatives of Ė_S + Ė_B in AC
-    and AI (one world; docs/theory/gradients.md, "The shell's parameters"): with ā = λā⁰ (λ = e^{-AC c}),
-    ∂/∂AC (Ė_S + Ė_B) = c (Ė_S + Ė_B + S_m ω̄ 2(1+ν) ā⁻¹ : ȧ) per point, and ∂K/∂AI = c ā⁻¹ b̄⁰. One thread per
-    quadrature point (whole blocks: the threads past them add zero); the first V threads add the volume's centroid
-    term -d_I · F_x̄ (kernels/shell.py `volume_centroid_force`)."""
+    and AI (one world; docs/theory/gradients.md, "Walkers: reverse mode"): with ā = λā⁰ (λ = e^{-AC c}),
+    ∂/∂AC (Ė_S + Ė_B) = c (Ė_S + Ė_B + S_m ω̄ 2(1+ν) ā⁻¹ : ȧ) per point, and ∂K/∂AI = c ā⁻¹ b̄⁰; the bilayer
+    (bilayer_radius R > 0: b̄ = Λb̄⁰ - A c ā⁰, Λ = √λ, A = (AC/2 - AI)/R) adds b̄'s share through Λ and A. One thread
+    per quadrature point (whole blocks: the threads past them add zero); the first V threads add the volume's
+    centroid term -d_I · F_x̄ (kernels/shell.py `volume_centroid_force`)."""
     q = wp.tid()
     value = ShellRates()
     if q < ref_weight.shape[0]:
@@ -234,6 +238,11 @@ def shell_rates_kernel(
         one = type(nu)(1.0)
         metric = cq * (stretching + bending_rate + stretching_weight * (one + one) * (one + nu) * wp.ddot(inv, a_rate))
         curvature = bending_weight * wp.ddot(material_stress(cq * (inv * rest_curvature[q]), inv, nu), b_rate)
+        if bilayer_radius > type(nu)(0.0):  # ∂b̄/∂Λ = b̄⁰ (Λ = e^{-AC c/2}), ∂b̄/∂A = -c ā⁰
+            by_a = bending_weight * wp.ddot(material_stress(cq * (inv * rest_metric[q]), inv, nu), b_rate)
+            stretch = wp.exp(-AC * cq / (one + one))
+            metric = metric + stretch / (one + one) * curvature + by_a / ((one + one) * bilayer_radius)
+            curvature = -by_a / bilayer_radius
         centroid, pressure = world_volume_terms(x, moments, target, penalty, 1, 0)
         scale = type(nu)(pressure) * weights[q % points_per_triangle]
         volume = scale * (wp.dot(dp, wp.cross(x1, x2)) + wp.dot(p - centroid, area_rate))
@@ -268,7 +277,8 @@ declare_overloads(directional_difference_kernel, plus="vec3[]", minus="vec3[]", 
 declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
 declare_overloads(shell_rates_kernel, x="vec3[]", direction="vec3[]", c="scalar[]", basis="vec6[,]", weights="scalar[]",
                   ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]",
-                  rest_curvature="mat22[]", stretching_modulus="scalar[]", bending_modulus="scalar[]", nu="scalar")
+                  rest_metric="mat22[]", rest_curvature="mat22[]", stretching_modulus="scalar[]",
+                  bending_modulus="scalar[]", nu="scalar", AC="scalar", bilayer_radius="scalar")
 
 
 
@@ -353,14 +363,15 @@ def eval_scaled_inverse_mass(w, inverse_mass, scale: float, out) -> None:
               outputs=[out], device=w.device)  # fmt: skip
 
 
-def eval_shell_rates(x, direction, c, patch: list, reference: list, rest_curvature, moduli: list, nu, volume: list,
-                     rates) -> None:  # fmt: skip
+def eval_shell_rates(x, direction, c, patch: list, reference: list, rest: list, moduli: list, nu, AC, bilayer_radius,
+                     volume: list, rates) -> None:  # fmt: skip
     """rates[0] = `shell_rates_kernel`'s sums (zeroed here): `patch` the weighted patch tables, `reference` ā, ā⁻¹, b̄,
-    dω̄, `moduli` the stretching and bending moduli's arrays, `volume` the moments at x, V̄ and the penalty."""
+    dω̄, `rest` ā⁰, b̄⁰, `moduli` the stretching and bending moduli's arrays, bilayer_radius 0 for the Koiter
+    reference, `volume` the moments at x, V̄ and the penalty."""
     rates.zero_()
-    points = len(reference[-1])
+    points, s = len(reference[-1]), scalar_of(x)
     wp.launch(shell_rates_kernel, dim=-(-points // REDUCTION_BLOCK) * REDUCTION_BLOCK,
-              inputs=[x, direction, c, *patch, *reference, rest_curvature, *moduli, scalar_of(x)(nu), *volume],
+              inputs=[x, direction, c, *patch, *reference, *rest, *moduli, s(nu), s(AC), s(bilayer_radius), *volume],
               outputs=[rates], block_dim=REDUCTION_BLOCK, device=x.device)  # fmt: skip
 
 

@@ -27,14 +27,15 @@ PAPER_WALK = ["level=1", "settle=2", "frames=1", "dtype=float64", "mechanics=ove
               "sharpness=0.1", "sensitive=false", "drag=60", "AC=0.3"]  # fmt: skip
 COULOMB = ["contact_solve=implicit", "sharpness=inf"]
 SPHERE = load_scene("sphere-walker")
+BILAYER = load_scene("bilayer-walker")
 
 
 def parameters(*overrides):
     return resolve(SPHERE.Parameters, {}, [*PAPER_WALK, *overrides])
 
 
-def settled(p) -> WalkerRun:
-    mesh, options = SPHERE.recipe(p, report=lambda message: None)
+def settled(p, scene=SPHERE) -> WalkerRun:
+    mesh, options = scene.recipe(p, report=lambda message: None)
     return WalkerRun("walker", mesh, p, report=lambda message: None, **options)
 
 
@@ -74,12 +75,13 @@ def direction_dot_forces(mesh, x, c, direction, **moduli) -> float:
     return float(np.sum(shell.forces(x, c) * direction))
 
 
-def test_the_shells_rates_match_the_forces_and_their_differences_in_each_parameter():
+@pytest.mark.parametrize("model", ["koiter", "bilayer"])
+def test_the_shells_rates_match_the_forces_and_their_differences_in_each_parameter(model):
     """Ė = -d·F, and each term's share through its parameter: -d·∂F/∂θ by central differences of shells built at
     θ ± δ (Y, h scale the elastic terms as Y h, Y h³; the shell's penalty is a number of its own here; AC and AI move
-    the reference)."""
+    the reference: Koiter's, or the bilayer's through Λ and A as well)."""
     mesh, rng = icosphere(1.0, level=1), np.random.default_rng(5)
-    moduli = {"thickness": 0.05, "young": 3.0, "AC": 0.3, "AI": 0.7, "volume_penalty": 5.0}
+    moduli = {"thickness": 0.05, "young": 3.0, "AC": 0.3, "AI": 0.7, "volume_penalty": 5.0, "model": model}
     x = mesh.vertices + 0.02 * rng.standard_normal(mesh.vertices.shape)
     c, direction = rng.uniform(0.0, 1.0, len(x)), rng.standard_normal(x.shape)
     shell = Shell(mesh, dtype="float64", device="cpu", **moduli)
@@ -91,7 +93,7 @@ def test_the_shells_rates_match_the_forces_and_their_differences_in_each_paramet
     expected = {"thickness": (stretching + 3 * bending) / moduli["thickness"], "AC": metric, "AI": curvature,
                 "young": (stretching + bending) / moduli["young"], "volume_penalty": volume / moduli["volume_penalty"]}
     for name, rate in expected.items():
-        delta = 1e-5 * moduli[name]
+        delta = 1e-5 * float(moduli[name])
         ends = [direction_dot_forces(mesh, x, c, direction, **{**moduli, name: moduli[name] + sign * delta})
                 for sign in (1.0, -1.0)]  # fmt: skip
         assert -rate == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-6), name
@@ -184,13 +186,13 @@ def test_the_settlings_replay_from_the_placement_ends_at_the_walks_start_bitwise
     assert np.array_equal(WalkAdjoint(run).replay_settling(), start[-2].numpy())
 
 
-def whole_run_difference(p, base, name, relative) -> float:
+def whole_run_difference(p, base, name, relative, scene=SPHERE) -> float:
     """(J(θ + δ) - J(θ - δ)) / 2δ of whole runs (placed, settled with `base`'s mechanics steps, walked) at θ ± δ."""
     theta = float(getattr(p, name))
     delta = relative * (abs(theta) or 1.0)
     ends = []
     for sign in (1.0, -1.0):
-        mesh, options = SPHERE.recipe(p, report=lambda message: None)
+        mesh, options = scene.recipe(p, report=lambda message: None)
         run = WalkerRun("walker", mesh, replace(p, **{name: theta + sign * delta}), mechanics_dt=base.settle_dt,
                         report=lambda message: None, **options)  # fmt: skip
         ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
@@ -238,6 +240,16 @@ def test_the_adjoint_in_the_body_frame_matches_central_differences_of_whole_runs
     adjoint = WalkAdjoint(run, names).gradient(run.frames * run.steps_per_frame, settle=True)
     for name in names:
         assert adjoint["gradient"][name] == pytest.approx(whole_run_difference(p, run, name, relative), rel=1e-5), name
+
+
+def test_the_adjoint_on_the_bilayer_walker_matches_central_differences_of_whole_runs():
+    """The bilayer reference (b̄ = Λb̄⁰ - A c ā⁰): AC and AI move the curvature through Λ and A = (AC/2 - AI)/R."""
+    p = resolve(BILAYER.Parameters, {}, [*PAPER_WALK, "periods=0.25"])
+    run = settled(p, BILAYER)
+    adjoint = WalkAdjoint(run, ["AC", "AI"]).gradient(run.frames * run.steps_per_frame, settle=True)
+    for name in ("AC", "AI"):
+        difference = whole_run_difference(p, run, name, 1e-3, BILAYER)
+        assert adjoint["gradient"][name] == pytest.approx(difference, rel=1e-5), name
 
 
 def test_the_implicit_contacts_checkpointed_gradient_equals_the_fully_stored_one_bitwise(coulomb_half_period):

@@ -3,9 +3,9 @@
 The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the contact on the limit points or
 per area, explicit with a smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the
 scenes' default: its adjoint in wavewarp/adjoint_contact.py) with the drag in the lab or the body frame, the Koiter
-shell, the insensitive wave (the chemistry does not see the shape: c(t) is data for the mechanics), one world,
-float64. The objective is the walk's J, the centre of mass's
-displacement along the wave in R from the walk's start to its end. One pass back gives dJ/dθ for every parameter of
+or the bilayer shell, the insensitive wave (the chemistry does not see the shape: c(t) is data for the mechanics),
+one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R from the
+walk's start to its end. One pass back gives dJ/dθ for every parameter of
 `ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
 
 Per mechanics substep, backwards: ŵ = v̂' + dt x̂', F̂ = ŵ/(ζM); the shell's x̂ += (∂F/∂x)ᵀF̂ = -H F̂ (H symmetric:
@@ -105,8 +105,7 @@ def check_adjoint_walk(p, wrt) -> None:
 
 def check_adjoint_shell(shell) -> None:
     """Raise WalkerGradientError where the reverse mode does not cover `shell` (its model, dtype, worlds)."""
-    needs = [(shell.model != "koiter", "the Koiter shell (not the bilayer)"), (shell.scalar != wp.float64, "dtype=float64"),
-             (shell.worlds != 1, "one world")]  # fmt: skip
+    needs = [(shell.scalar != wp.float64, "dtype=float64"), (shell.worlds != 1, "one world")]
     missing = [fix for needed, fix in needs if needed]
     if missing:
         raise WalkerGradientError(f"the reverse mode needs {'; '.join(missing)} (--method differences takes the rest)")

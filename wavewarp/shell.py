@@ -351,12 +351,14 @@ class Shell:
 
     def rates_device(self, x: wp.array, direction: wp.array, rates: wp.array) -> None:
         """rates[0] = (Ė_S, Ė_B, Ė_V, ∂(Ė_S + Ė_B)/∂AC, ∂(Ė_S + Ė_B)/∂AI) as x moves along `direction`, at the current
-        reference (one world; kernels/adjoint.py `shell_rates_kernel`): the shell's parameters' share of a gradient."""
+        reference, Koiter's or the bilayer's (one world; kernels/adjoint.py `shell_rates_kernel`): the shell's
+        parameters' share of a gradient."""
         if self.has_volume:
             self._launch_volume(x, differentiable=False)
         eval_shell_rates(x, direction, self.reference_c, self.tables.weighted_patch(), self.reference_arrays(),
-                         self.rest_curvature, list(self._moduli), self.poisson, [self._moments, self._target,
-                                                                                 self._penalty], rates)  # fmt: skip
+                         [self.rest_metric, self.rest_curvature], list(self._moduli), self.poisson, self.AC,
+                         self.bilayer_radius if self.model == "bilayer" else 0.0,
+                         [self._moments, self._target, self._penalty], rates)  # fmt: skip
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
