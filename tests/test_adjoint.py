@@ -12,6 +12,7 @@ import warp as wp
 
 from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
 from wavewarp.benchmarks.inverse_design import main as inverse_design
+from wavewarp.benchmarks.tape_adjoints import LAWS, LawCase
 from wavewarp.cli import main
 from wavewarp.kernels.adjoint import ShellRates
 from wavewarp.mesh import icosphere
@@ -97,6 +98,20 @@ def test_the_shells_rates_match_the_forces_and_their_differences_in_each_paramet
         ends = [direction_dot_forces(mesh, x, c, direction, **{**moduli, name: moduli[name] + sign * delta})
                 for sign in (1.0, -1.0)]  # fmt: skip
         assert -rate == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-6), name
+
+
+@pytest.mark.parametrize("law", LAWS)
+def test_the_ground_laws_adjoints_match_a_directional_difference_and_warps_tape(law):
+    """The hand-written adjoints of the ground laws at points in and out of contact against a central difference of
+    f̂ · f along a random direction and, where its adjoint is right (not through the tanh law's Newton loop for the
+    slip speed: benchmarks/tape_adjoints.py), against Warp's tape of the forward kernels."""
+    case = LawCase(law, 500, device="cpu")
+    hand = case.hand()
+    assert case.along_direction(hand) == pytest.approx(case.directional_difference(), rel=1e-7)
+    if law != "implicit-tanh":
+        taped = case.tape_backward(case.record())
+        for mine, warps in zip(hand, taped):
+            np.testing.assert_allclose(mine, warps, rtol=0, atol=1e-13 * np.abs(mine).max())
 
 
 def test_the_forward_walk_replays_the_runs_coupled_steps_bitwise(half_period):

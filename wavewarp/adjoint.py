@@ -10,11 +10,11 @@ walk's start to its end. One pass back gives dJ/dθ for every parameter of
 
 Per mechanics substep, backwards: ŵ = v̂' + dt x̂', F̂ = ŵ/(ζM); the shell's x̂ += (∂F/∂x)ᵀF̂ = -H F̂ (H symmetric:
 the central difference of the forces along F̂); the ground's law at the limit points is differentiated by hand
-(kernels/adjoint.py) and reaches x̂, v̂ through Lᵀ; the shell's parameters by F̂ · ∂F/∂θ = -∂Ė/∂θ, Ė the energy's
-rate of change along F̂, whose terms one pass over the quadrature points gives with their derivatives in AC and AI
-(Y scales every term, h the stretching and volume once and the bending thrice, μV the volume term). The rigid-body
-correction of the forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque of F vanish
-at every x.
+(kernels/adjoint_contact.py) and reaches x̂, v̂ through Lᵀ; the shell's parameters by F̂ · ∂F/∂θ = -∂Ė/∂θ, Ė the
+energy's rate of change along F̂, whose terms one pass over the quadrature points gives with their derivatives in AC
+and AI (Y scales every term, h the stretching and volume once and the bending thrice, μV the volume term). The
+rigid-body correction of the forces' round-off (kernels/dynamics.py) has zero derivative: the net force and torque
+of F vanish at every x.
 
 The whole run: back through the settling too, replayed from the placement (its overdamped phase by the same
 adjoint, its inertial phase by symplectic Euler's with the damping toward the rigid-body motion) and the placement's
