@@ -31,6 +31,7 @@ from wavewarp.device import describe_device, device_tag, resolve_device  # noqa:
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.parameters import load_scene, resolve  # noqa: E402
 
+GOAL = 5.0  # issue 31: the gradient at most 5× the walk's time
 PAPER_WALK = ["dtype=float64", "mechanics=overdamped", "contact_solve=explicit", "sharpness=0.1", "sensitive=false",
               "drag=60", "frames=1"]  # fmt: skip
 
@@ -121,6 +122,8 @@ def chart(result: dict, path: str) -> None:
         right.loglog(steps, [row[label]["state_bytes"] / 2**20 for row in rows], style, label=label)
     reference = rows[0]["checkpointed"]["state_bytes"] / 2**20 * np.sqrt(steps / steps[0])
     right.loglog(steps, reference, ":", color="grey", label="∝ √N")
+    left.axhline(GOAL, color="grey", linestyle=":", label=f"goal: {GOAL:g}×")
+    left.set_ylim(0, max(GOAL, *[row[label]["ratio"] for row in rows for label in ("checkpointed", "stored")]) * 1.15)
     left.set_xlabel("chemistry steps N")
     left.set_ylabel("gradient time / walk time")
     left.set_title(f"{len(result['wrt'])} parameters, one pass back")
