@@ -11,6 +11,7 @@ import pytest
 import warp as wp
 
 from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
+from wavewarp.benchmarks.adjoint_cost import main as adjoint_cost
 from wavewarp.benchmarks.inverse_design import main as inverse_design
 from wavewarp.benchmarks.tape_adjoints import LAWS, LawCase
 from wavewarp.cli import main
@@ -365,3 +366,17 @@ def test_the_start_gradient_knows_a_horizontal_shift_changes_nothing(fixture, re
     assert abs(x.sum(axis=0)[2]) > 1e-3 * np.abs(x).sum()
     if fixture == "coulomb_half_period":
         assert not gradient["v"].any()
+
+
+@pytest.mark.slow
+def test_the_adjoint_cost_benchmark_writes_its_figures_and_holds_fewer_states_checkpointed(tmp_path):
+    """A smoke run of `wavewarp bench adjoint_cost`: its JSON and chart, the gradients of its two passes equal, and
+    the checkpointed pass holding fewer bytes than the stored one, growing more slowly."""
+    assert adjoint_cost(["--device", "cpu", "--set", "level=1", "--set", "settle=2", "--periods", "0.1", "0.4",
+                         "--wrt", "AC", "friction", "--out", str(tmp_path)]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "adjoint_cost_cpu.json").read_text())
+    assert (tmp_path / "adjoint_cost_cpu.png").stat().st_size > 0
+    for row in result["rows"]:
+        assert row["checkpointed"]["gradient"] == row["stored"]["gradient"]
+        assert row["checkpointed"]["state_bytes"] < row["stored"]["state_bytes"]
+    assert result["memory_exponents"]["checkpointed"] < result["memory_exponents"]["stored"]
