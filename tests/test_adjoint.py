@@ -12,6 +12,7 @@ import warp as wp
 
 from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
 from wavewarp.benchmarks.adjoint_cost import main as adjoint_cost
+from wavewarp.benchmarks.adjoint_horizon import main as adjoint_horizon
 from wavewarp.benchmarks.inverse_design import main as inverse_design
 from wavewarp.benchmarks.tape_adjoints import LAWS, LawCase
 from wavewarp.cli import main
@@ -380,3 +381,15 @@ def test_the_adjoint_cost_benchmark_writes_its_figures_and_holds_fewer_states_ch
         assert row["checkpointed"]["gradient"] == row["stored"]["gradient"]
         assert row["checkpointed"]["state_bytes"] < row["stored"]["state_bytes"]
     assert result["memory_exponents"]["checkpointed"] < result["memory_exponents"]["stored"]
+
+
+@pytest.mark.slow
+def test_the_adjoint_horizon_benchmark_writes_its_figures_with_a_finite_growth(tmp_path):
+    """A smoke run of `wavewarp bench adjoint_horizon` (level-1 sphere, three short horizons)."""
+    assert adjoint_horizon(["--device", "cpu", "--set", "level=1", "--set", "settle=2", "--periods", "0.2", "1", "1.2",
+                            "--wrt", "AC", "--out", str(tmp_path)]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "adjoint_horizon_sphere-walker_cpu.json").read_text())
+    assert (tmp_path / "adjoint_horizon_sphere-walker_cpu.png").stat().st_size > 0
+    assert [row["periods"] for row in result["rows"]] == [0.2, 1.0, 1.2]
+    assert all(row["start_sensitivity"] > 0 for row in result["rows"])
+    assert math.isfinite(result["growth"]["rate"]) and math.isfinite(result["growth"]["power"])
