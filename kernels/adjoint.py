@@ -8,7 +8,7 @@ import warp as wp
 
 from . import declare_overloads, scalar_of
 from .limit_surface import basis_row, patch_jet, patch_scalar
-from .reduce import REDUCTION_BLOCK, block_add
+from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
 from .shell import VolumeMoments, koiter_jet, material_stress, volume_centroid_force, world_volume_terms
 
 ShellRates = wp.types.vector(length=5, dtype=wp.float64)  # `shell_rates_kernel`'s five sums
@@ -370,7 +370,7 @@ def eval_shell_rates(x, direction, c, patch: list, reference: list, rest: list, 
     reference, `volume` the moments at x, V̄ and the penalty."""
     rates.zero_()
     points, s = len(reference[-1]), scalar_of(x)
-    wp.launch(shell_rates_kernel, dim=-(-points // REDUCTION_BLOCK) * REDUCTION_BLOCK,
+    wp.launch(shell_rates_kernel, dim=whole_blocks(points),
               inputs=[x, direction, c, *patch, *reference, *rest, *moduli, s(nu), s(AC), s(bilayer_radius), *volume],
               outputs=[rates], block_dim=REDUCTION_BLOCK, device=x.device)  # fmt: skip
 

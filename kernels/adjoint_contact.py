@@ -8,7 +8,7 @@ import warp as wp
 
 from . import declare_overloads, scalar_of
 from .contact import slip_speed as slip_root
-from .reduce import REDUCTION_BLOCK, block_add
+from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
 
 LawGradient = wp.types.vector(length=5, dtype=wp.float64)  # ∂/∂(k, β, μ, k_f, r) of one point's law
 
@@ -203,11 +203,6 @@ declare_overloads(ground_adjoint_kernel, p="vec3[]", u="vec3[]", force_hat="vec3
                   mu="scalar", k_f="scalar", p_hat="vec3[]", u_hat="vec3[]")  # fmt: skip
 
 
-def blocks(n: int) -> int:
-    """n rounded up to whole reduction blocks."""
-    return -(-n // REDUCTION_BLOCK) * REDUCTION_BLOCK
-
-
 def implicit_laws(ground, scale: float, dt: float) -> list:
     """The implicit ground law's launch arguments after the points' arrays (float64): scale, dt, k, β, μ, k_f."""
     return [wp.float64(value) for value in (scale, dt, ground.stiffness, ground.damping, ground.friction,
@@ -225,7 +220,7 @@ def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, f
 
 def eval_horizontal_sum(values, total) -> None:
     """total[0] += Σ values' horizontal parts."""
-    wp.launch(horizontal_sum_kernel, dim=blocks(len(values)), inputs=[values], outputs=[total],
+    wp.launch(horizontal_sum_kernel, dim=whole_blocks(len(values)), inputs=[values], outputs=[total],
               block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
 
 
@@ -235,7 +230,7 @@ def eval_body_step_adjoint(ground, p, u, body, response, weight, scale: float, d
     the step's (G - external, h) at U = `body`, `seeds` scratch for (Ĝ, ĥ); body_hat: Û' in, Û out."""
     device = p.device
     wp.launch(body_step_seeds_kernel, dim=1, inputs=[*sums, external, body_hat], outputs=seeds, device=device)
-    wp.launch(body_step_adjoint_kernel, dim=blocks(len(p)),
+    wp.launch(body_step_adjoint_kernel, dim=whole_blocks(len(p)),
               inputs=[p, u, body, response, weight, *implicit_laws(ground, scale, dt), *seeds],
               outputs=[u_hat, p_hat, gradient, body_hat], block_dim=REDUCTION_BLOCK, device=device)  # fmt: skip
 

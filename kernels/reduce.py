@@ -11,6 +11,11 @@ from . import declare_overloads
 REDUCTION_BLOCK = wp.constant(256)
 
 
+def whole_blocks(n: int) -> int:
+    """n rounded up to whole blocks of REDUCTION_BLOCK threads (a launch whose threads past n add zero)."""
+    return -(-n // REDUCTION_BLOCK) * REDUCTION_BLOCK
+
+
 @wp.func
 def block_add(total: wp.array(dtype=Any), index: int, value: Any):
     """total[index] += Σ value over the thread block (a shared-memory tile sum, one atomic per block);

@@ -18,6 +18,8 @@ points' horizontal ô, and each step, taken back from its stored U, gives its po
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import warp as wp
 
 from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_weighted_dot
@@ -30,7 +32,6 @@ from .kernels.adjoint_contact import (
 from .kernels.contact import (
     add_body_velocity_kernel,
     body_friction_sums_kernel,
-    body_velocity_kernel,
     contact_indicator_kernel,
     ground_motion,
     implicit_contact_kernel,
@@ -38,6 +39,7 @@ from .kernels.contact import (
     limit_response_kernel,
     quadrature_coupled_velocity_kernel,
     quadrature_response_kernel,
+    solve_body_velocity,
     spread_to_control_points,
 )
 from .kernels.reduce import REDUCTION_BLOCK
@@ -76,6 +78,9 @@ class ImplicitContactAdjoint:
                 self.sums = [wp.zeros(1, dtype=wp.vec3d), wp.zeros(1, dtype=wp.float64)]
                 self.seeds = [wp.zeros(1, dtype=wp.vec3d), wp.zeros(1, dtype=wp.float64)]
                 self.body_hat, self.slip = wp.zeros(1, dtype=wp.vec3d), wp.zeros(n, dtype=wp.vec3d)
+            # each Weiszfeld step's frame: the solver's, stepping its own iterate
+            self.steps = [[replace(self.frame, velocity=iterate) for iterate in iterates[1:]]
+                          for iterates in self.iterates]  # fmt: skip
 
     def _coupled(self, forces, predictor, response, area, scale: float, out) -> None:
         """out = predictor + scale (G M⁻¹ S_area forces - response forces) (the sweep's velocity without the point's
@@ -109,7 +114,8 @@ class ImplicitContactAdjoint:
                       outputs=[self.normal, self.forces[s]], device=device)  # fmt: skip
 
     def _sums(self, velocities, body, laws) -> None:
-        """self.sums = the net friction Σ a f_t and the stiffness Σ a |f_t|/|y| at body velocity `body`."""
+        """self.sums = the net friction Σ a f_t and the stiffness Σ a |f_t|/|y| at body velocity `body` (the sums of a
+        Weiszfeld step, without the step)."""
         for total in self.sums:
             total.zero_()
         frame = self.frame
@@ -124,11 +130,9 @@ class ImplicitContactAdjoint:
             iterates[0].zero_()
         else:
             wp.copy(iterates[0], self.iterates[s - 1][-1])
-        for step in range(len(iterates) - 1):
+        for step, frame in enumerate(self.steps[s]):  # U_{k+1} = U_k + G/h, into its own iterate
             wp.copy(iterates[step + 1], iterates[step])
-            self._sums(velocities, iterates[step], laws)
-            wp.launch(body_velocity_kernel, dim=1, inputs=[*self.sums, self.frame.external],
-                      outputs=[iterates[step + 1]], device=self.p.device)  # fmt: skip
+            solve_body_velocity(frame, self.p, velocities, self.response, laws, 1)
         return iterates[-1]
 
     def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat, velocity_hat) -> None:

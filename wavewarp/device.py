@@ -13,7 +13,7 @@ import numpy as np
 import warp as wp
 
 from . import kernels
-from .kernels.reduce import REDUCTION_BLOCK, world_sum_kernel
+from .kernels.reduce import REDUCTION_BLOCK, whole_blocks, world_sum_kernel
 
 DTYPES = {"float32": wp.float32, "float64": wp.float64}
 # atomic updates one thread may record in deterministic mode, per kernel module: a patch scatters 18
@@ -133,7 +133,7 @@ def reduction_threads(n: int, deterministic=None) -> int:
     sum has a fixed order; the atomics that join several blocks' sums do not)."""
     if deterministic_default(deterministic):
         return int(REDUCTION_BLOCK)
-    return -(-n // REDUCTION_BLOCK) * REDUCTION_BLOCK
+    return whole_blocks(n)
 
 
 def world_sums(values: wp.array, total: wp.array, worlds: int = 1, deterministic=None) -> None:
