@@ -208,18 +208,24 @@ def shell_rates_kernel(
     bending_modulus: wp.array(dtype=Any),
     nu: Any,
     AC: Any,
+    AI: Any,
     bilayer_radius: Any,
     moments: wp.array(dtype=VolumeMoments),
     target: wp.array(dtype=wp.float64),
     penalty: wp.array(dtype=wp.float64),
+    ramp: Any,
     rates: wp.array(dtype=ShellRates),
+    by_start: wp.array(dtype=Any),
+    by_end: wp.array(dtype=Any),
 ):
     """rates[0] += the rates of change of E_S, E_B and E_V as x moves along d, and the derivatives of Ė_S + Ė_B in AC
     and AI (one world; docs/theory/gradients.md, "Walkers: reverse mode"): with ā = λā⁰ (λ = e^{-AC c}),
     ∂/∂AC (Ė_S + Ė_B) = c (Ė_S + Ė_B + S_m ω̄ 2(1+ν) ā⁻¹ : ȧ) per point, and ∂K/∂AI = c ā⁻¹ b̄⁰; the bilayer
     (bilayer_radius R > 0: b̄ = Λb̄⁰ - A c ā⁰, Λ = √λ, A = (AC/2 - AI)/R) adds b̄'s share through Λ and A. One thread
     per quadrature point (whole blocks: the threads past them add zero); the first V threads add the volume's
-    centroid term -d_I · F_x̄ (kernels/shell.py `volume_centroid_force`)."""
+    centroid term -d_I · F_x̄ (kernels/shell.py `volume_centroid_force`). The reference is a function of AC c and AI c,
+    so -∂Ė/∂c_q = -(AC ∂/∂AC + AI ∂/∂AI)/c: where `by_start` holds the points (the sensitive wave's adjoint) it
+    gains (1 - ramp) of it and `by_end` ramp of it (the substep's reference c_start + ramp (c_end - c_start))."""
     q = wp.tid()
     value = ShellRates()
     if q < ref_weight.shape[0]:
@@ -236,13 +242,19 @@ def shell_rates_kernel(
         bending_rate = bending_weight * wp.ddot(material_stress(bending, inv, nu), b_rate)
         cq = patch_scalar(c, patch_start, patch_vertices, basis, t, row)
         one = type(nu)(1.0)
-        metric = cq * (stretching + bending_rate + stretching_weight * (one + one) * (one + nu) * wp.ddot(inv, a_rate))
-        curvature = bending_weight * wp.ddot(material_stress(cq * (inv * rest_curvature[q]), inv, nu), b_rate)
+        metric = stretching + bending_rate + stretching_weight * (one + one) * (one + nu) * wp.ddot(inv, a_rate)
+        curvature = bending_weight * wp.ddot(material_stress(inv * rest_curvature[q], inv, nu), b_rate)
         if bilayer_radius > type(nu)(0.0):  # ∂b̄/∂Λ = b̄⁰ (Λ = e^{-AC c/2}), ∂b̄/∂A = -c ā⁰
-            by_a = bending_weight * wp.ddot(material_stress(cq * (inv * rest_metric[q]), inv, nu), b_rate)
+            by_a = bending_weight * wp.ddot(material_stress(inv * rest_metric[q], inv, nu), b_rate)
             stretch = wp.exp(-AC * cq / (one + one))
             metric = metric + stretch / (one + one) * curvature + by_a / ((one + one) * bilayer_radius)
             curvature = -by_a / bilayer_radius
+        if by_start.shape[0] > 0:
+            by_c = -(AC * metric + AI * curvature)
+            by_start[q] = by_start[q] + (one - ramp) * by_c
+            by_end[q] = by_end[q] + ramp * by_c
+        metric = cq * metric
+        curvature = cq * curvature
         centroid, pressure = world_volume_terms(x, moments, target, penalty, 1, 0)
         scale = type(nu)(pressure) * weights[q % points_per_triangle]
         volume = scale * (wp.dot(dp, wp.cross(x1, x2)) + wp.dot(p - centroid, area_rate))
@@ -278,7 +290,8 @@ declare_overloads(weighted_dot_kernel, a="vec3[]", b="vec3[]")
 declare_overloads(shell_rates_kernel, x="vec3[]", direction="vec3[]", c="scalar[]", basis="vec6[,]", weights="scalar[]",
                   ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]",
                   rest_metric="mat22[]", rest_curvature="mat22[]", stretching_modulus="scalar[]",
-                  bending_modulus="scalar[]", nu="scalar", AC="scalar", bilayer_radius="scalar")
+                  bending_modulus="scalar[]", nu="scalar", AC="scalar", AI="scalar", bilayer_radius="scalar",
+                  ramp="scalar", by_start="scalar[]", by_end="scalar[]")
 
 
 
@@ -363,16 +376,18 @@ def eval_scaled_inverse_mass(w, inverse_mass, scale: float, out) -> None:
               outputs=[out], device=w.device)  # fmt: skip
 
 
-def eval_shell_rates(x, direction, c, patch: list, reference: list, rest: list, moduli: list, nu, AC, bilayer_radius,
-                     volume: list, rates) -> None:  # fmt: skip
+def eval_shell_rates(x, direction, c, patch: list, reference: list, rest: list, moduli: list, nu, AC, AI,
+                     bilayer_radius, volume: list, rates, by_concentration: tuple, ramp: float) -> None:  # fmt: skip
     """rates[0] = `shell_rates_kernel`'s sums (zeroed here): `patch` the weighted patch tables, `reference` ā, ā⁻¹, b̄,
     dω̄, `rest` ā⁰, b̄⁰, `moduli` the stretching and bending moduli's arrays, bilayer_radius 0 for the Koiter
-    reference, `volume` the moments at x, V̄ and the penalty."""
+    reference, `volume` the moments at x, V̄ and the penalty; `by_concentration`: the per-point arrays (by_start,
+    by_end) that gain -∂Ė/∂c_q split by `ramp`, or two empty arrays."""
     rates.zero_()
     points, s = len(reference[-1]), scalar_of(x)
     wp.launch(shell_rates_kernel, dim=whole_blocks(points),
-              inputs=[x, direction, c, *patch, *reference, *rest, *moduli, s(nu), s(AC), s(bilayer_radius), *volume],
-              outputs=[rates], block_dim=REDUCTION_BLOCK, device=x.device)  # fmt: skip
+              inputs=[x, direction, c, *patch, *reference, *rest, *moduli, s(nu), s(AC), s(AI), s(bilayer_radius),
+                      *volume, s(ramp)],
+              outputs=[rates, *by_concentration], block_dim=REDUCTION_BLOCK, device=x.device)  # fmt: skip
 
 
 def eval_shell_parameter_gradient(rates, factors, gradient) -> None:

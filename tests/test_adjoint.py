@@ -189,7 +189,7 @@ def test_the_checkpoints_bytes_grow_as_the_square_root_of_the_steps(substeps):
 
 
 @pytest.mark.parametrize("overrides, wrt, message", [
-    (["sensitive=true"], ["AC"], "sensitive=false"), (["mechanics=inertial"], ["AC"], "mechanics=overdamped"),
+    (["sensitive=true", "dt=0"], ["AC"], "dt=0.5"), (["mechanics=inertial"], ["AC"], "mechanics=overdamped"),
     (["contact_solve=implicit", "sharpness=inf"], ["sharpness"], "no derivative in k_f"),
     ([], ["density"], "density"),
     (["drag=0"], ["contact_damping"], "--set drag="), (["mu_v=0"], ["mu_v"], "mu_v > 0")])  # fmt: skip
@@ -291,6 +291,63 @@ def test_the_body_frames_checkpointed_gradient_equals_the_fully_stored_one_bitwi
         results.append(WalkAdjoint(run, ["AC", "friction", "drag"], checkpoint_every=every).gradient(steps, settle=True))
     assert results[0]["gradient"] == results[1]["gradient"]
     assert np.array_equal(results[0]["start"]["x"], results[1]["start"]["x"])
+
+
+@pytest.fixture(scope="module")
+def sensitive_quarter():
+    """The paper's walker model with the sensitive wave, settled: its start state and a quarter period's steps."""
+    run = settled(parameters("periods=0.25", "sensitive=true"))
+    return run, [wp.clone(a) for a in walk_state(run)], run.frames * run.steps_per_frame
+
+
+def test_the_sensitive_waves_adjoint_matches_central_differences_of_walks_from_the_same_start(sensitive_quarter):
+    """The wave on the deforming shell: J depends on AC through the mechanics and through the chemistry the shape
+    steers (docs/theory/gradients.md, "The sensitive wave")."""
+    run, start, steps = sensitive_quarter
+    put(run, start)
+    adjoint = WalkAdjoint(run, ["AC"]).gradient(steps)["gradient"]["AC"]
+    assert adjoint == pytest.approx(difference_from_start(run.p, start, steps, "AC", 1e-3), rel=1e-5)
+
+
+def test_the_sensitive_waves_start_gradient_in_c_and_x_matches_central_differences(sensitive_quarter):
+    """dJ/dc₀ (through the mechanics' reference and the wave's steps) and dJ/dx₀ (the mechanics and the operator's
+    surface) along random directions."""
+    run, start, steps = sensitive_quarter
+    put(run, start)
+    result = WalkAdjoint(run).gradient(steps)["start"]
+    rng = np.random.default_rng(7)
+    for name, live, index, step in (("c", run.wave.state.c, 0, 1e-4), ("x", run.dynamics.state.x, -2, 1e-4 * run.radius)):
+        direction = rng.standard_normal(result[name].shape)
+        ends = []
+        for sign in (1.0, -1.0):
+            put(run, start)
+            live.assign(start[index].numpy() + sign * step * direction)
+            run.shell.update_reference(run.wave.c)
+            ends.append(WalkAdjoint(run).walk(steps))
+        assert np.sum(result[name] * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5), name
+
+
+def test_the_sensitive_waves_checkpointed_gradient_equals_the_fully_stored_one_bitwise(sensitive_quarter):
+    run, start, steps = sensitive_quarter
+    results = []
+    for every in (steps, 5):
+        put(run, start)
+        results.append(WalkAdjoint(run, ["AC", "thickness"], checkpoint_every=every).gradient(steps))
+    assert results[0]["gradient"] == results[1]["gradient"] and results[0]["objective"] == results[1]["objective"]
+    for name in ("x", "c", "w"):
+        assert np.array_equal(results[0]["start"][name], results[1]["start"][name])
+
+
+@pytest.mark.parametrize("names", [["thickness"], pytest.param(["friction", "AC", "drag"], marks=pytest.mark.slow)])
+def test_the_scenes_default_walker_adjoint_matches_central_differences_of_whole_runs(names):
+    """The scenes' walker as it is (the sensitive wave, the implicit contact with Coulomb's law, two mass corrections)
+    through the settling and the pulse placed on the settled surface."""
+    p = resolve(SPHERE.Parameters, {}, ["level=1", "settle=2", "frames=1", "dtype=float64", "periods=0.25", "AC=0.3"])
+    assert p.sensitive and p.contact_solve == "implicit" and math.isinf(p.sharpness) and p.mass_corrections == 2
+    run = settled(p)
+    gradient = WalkAdjoint(run, names).gradient(run.frames * run.steps_per_frame, settle=True)["gradient"]
+    for name in names:
+        assert gradient[name] == pytest.approx(whole_run_difference(p, run, name, 1e-4), rel=1e-5), name
 
 
 def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points(capsys):

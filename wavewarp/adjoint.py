@@ -3,8 +3,9 @@
 The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v'), the contact on the limit points or
 per area, explicit with a smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the
 scenes' default: its adjoint in wavewarp/adjoint_contact.py) with the drag in the lab or the body frame, the Koiter
-or the bilayer shell, the insensitive wave (the chemistry does not see the shape: c(t) is data for the mechanics),
-one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R from the
+or the bilayer shell, the sensitive wave (the scenes' default: the chemistry on the moving surface, taken back by
+wavewarp/adjoint_wave.py with the ĉ the substeps' references hand it) or the insensitive one (c(t) is data for the
+mechanics), one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R from the
 walk's start to its end. One pass back gives dJ/dθ for every parameter of
 `ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
 
@@ -35,10 +36,12 @@ import warp as wp
 
 from . import kernels
 from .adjoint_contact import ImplicitContactAdjoint
+from .adjoint_wave import WaveAdjoint
 from .coupled import GRAPH_SUBSTEPS
 from .device import run_steps
 from .dynamics import InertialSolver
 from .geometry import limit_positions, limit_surface
+from .initial import gaussian_pulse_adjoint
 from .kernels.adjoint import (
     ShellRates,
     eval_area_scale,
@@ -63,7 +66,7 @@ ADJOINT_PARAMETERS = SHELL_PARAMETERS + GROUND_PARAMETERS + ("drag",)
 SETTLE_FREE = ("AC", "AI")  # the walk's start (settled at c = 0) does not depend on them
 ACTION_STEP = 1e-4  # the Hessian action's central difference, in mean edges along the direction's largest component (1e-5: round-off)
 MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
-           kernels.reduce, kernels.adjoint, kernels.adjoint_contact)  # what a walk and its adjoint launch
+           kernels.reduce, kernels.adjoint, kernels.adjoint_contact, kernels.adjoint_wave)  # what a walk and its adjoint launch
 
 
 def rate_factors(p) -> np.ndarray:
@@ -86,13 +89,12 @@ def check_adjoint_walk(p, wrt) -> None:
         raise WalkerGradientError(f"--wrt {','.join(unknown) or '(nothing)'}: the reverse mode differentiates "
                                   f"{', '.join(ADJOINT_PARAMETERS)} (central differences take the rest: --method "
                                   "differences)")  # fmt: skip
-    needs = [(p.sensitive, "sensitive=false (the wave on the rest shell: the chemistry's adjoint is not built)"),
-             (p.mechanics != "overdamped", "mechanics=overdamped")]  # fmt: skip
-    missing = [fix for needed, fix in needs if needed]
-    if missing:
-        raise WalkerGradientError("the reverse mode covers the overdamped walk with the "
-                                  f"insensitive wave; set {'; '.join(missing)}, or take central differences "
-                                  "(--method differences)")  # fmt: skip
+    if p.mechanics != "overdamped":
+        raise WalkerGradientError("the reverse mode covers the overdamped walk; set mechanics=overdamped, or take "
+                                  "central differences (--method differences)")  # fmt: skip
+    if p.sensitive and p.dt == 0:
+        raise WalkerGradientError("dt = auto follows the settled surface's stability bound, which the sensitive wave's "
+                                  "parameters move: give the chemistry step a value (--set dt=0.5)")  # fmt: skip
     if "sharpness" in wrt and math.isinf(p.sharpness):
         raise WalkerGradientError("sharpness = inf is Coulomb's law, which has no derivative in k_f: --set "
                                   "sharpness=1e4 walks as Coulomb does")  # fmt: skip
@@ -140,7 +142,8 @@ class WalkAdjoint:
             self._seed = wp.array(seed, dtype=shell.vec3)
             self._scratch = {name: wp.zeros(n, dtype=shell.vec3) for name in
                              ("x_hat", "v_hat", "w_hat", "force_hat", "probe", "plus", "minus",
-                              "x", "v", "v_next", "v_star", "a_ctrl", "v_star_hat")}  # fmt: skip
+                              "x", "v", "v_next", "v_star", "a_ctrl", "v_star_hat", "x_step",
+                              "x_step_end")}  # fmt: skip
             points = self.solver.ground_points  # the ground's: limit points, or quadrature points (area contact)
             self._points = {name: wp.zeros(points, dtype=shell.vec3) for name in
                             ("p", "u", "a", "unused", "p_hat", "u_hat", "u_star_hat")}  # fmt: skip
@@ -149,6 +152,7 @@ class WalkAdjoint:
             self._unit_area = None if area is None else wp.ones(points, dtype=shell.scalar)
             self._counters = {"step": wp.zeros(1, dtype=wp.int32), "substep": wp.zeros(1, dtype=wp.int32)}
             self._c_start, self._c_end = wp.empty_like(self.wave.c), wp.empty_like(self.wave.c)
+            self._w_start = wp.empty_like(self.wave.c)
             self._largest = wp.zeros(1, dtype=wp.float64)
             self._shell_gradient = wp.zeros(len(SHELL_PARAMETERS) + 1, dtype=wp.float64)  # + drag
             self._ground_gradient = wp.zeros(len(GROUND_PARAMETERS), dtype=wp.float64)
@@ -165,14 +169,24 @@ class WalkAdjoint:
         self._contacts = {}  # solver id -> its implicit contact's adjoint (ImplicitContactAdjoint)
         if self.solver.implicit:
             self._contact_of(self.solver)
-        self._xs = self._vs = self._cs = None  # the stretch's stored rows, allocated by `gradient`
+        self._xs = self._vs = self._cs = self._ws = None  # the stretch's stored rows, allocated by `gradient`
+        self.sensitive = bool(run.p.sensitive)
+        self._wave_adjoint = WaveAdjoint(self.wave, shell.tables) if self.sensitive else None
+        self._ramp = 1.0  # the reference's share of c_end at the substep being taken back
+        self._reference_adjoint = False  # the walk's substeps hand ĉ back to the wave (sensitive; not the settling)
 
     # ---------------------------------------------------------------- the forward walk
     def _state_arrays(self) -> list:
         return self.wave.state.arrays() + [self.dynamics.state.x, self.dynamics.state.v]
 
+    def _place_surface(self) -> None:
+        """The sensitive wave's operator at the shell's positions (as the run holds it between steps)."""
+        if self.sensitive:
+            self.wave.operator.update(self.dynamics.state.x)
+
     def _set_reference(self, k: int) -> None:
         """The active reference before substep k (1…S) of the chemistry step from c_start to c_end (`Walking._step`)."""
+        self._ramp = k / self.coupled.substeps if self.coupled.ramp else 1.0
         if self.coupled.ramp:
             eval_reference_ramp(self._c_start, self._c_end, k / self.coupled.substeps, self._c_ramp)
             self.shell.update_reference(self._c_ramp)
@@ -180,12 +194,15 @@ class WalkAdjoint:
             self.shell.update_reference(self._c_end)
 
     def _coupled_step(self, store: bool = False) -> None:
-        """One chemistry step and its mechanics substeps as `Walking._step` takes them (the insensitive wave). `store`:
-        c before the step and (x, v) before each substep pushed at the device's counters (the stretch's rows)."""
+        """One chemistry step and its mechanics substeps as `Walking._step` takes them, the sensitive wave then moved to
+        the new surface. `store`: c (and w) before the step and (x, v) before each substep pushed at the device's
+        counters (the stretch's rows)."""
         wave, d, counters = self.wave, self.dynamics, self._counters
         wp.copy(self._c_start, wave.c)
         if store:
             eval_push(wave.c, counters["step"], self._cs)
+            if self.sensitive:
+                eval_push(wave.state.w, counters["step"], self._ws)
             eval_count(counters["step"], 1)
         wave.solver.step(wave.state, wave.state, wave.dt)
         wp.copy(self._c_end, wave.c)
@@ -194,6 +211,8 @@ class WalkAdjoint:
                 self._push_mechanics()
             self._set_reference(k)
             d.solver.step(d.state, d.state, d.dt)
+        if self.sensitive:
+            wave.solver.move_surface(wave.state, d.state.x)
 
     def _push_mechanics(self) -> None:
         counter = self._counters["substep"]
@@ -216,6 +235,7 @@ class WalkAdjoint:
                 self._xs = wp.empty((rows, self.run.mesh.n_vertices), dtype=self.shell.vec3)
                 self._vs = wp.empty_like(self._xs)
                 self._cs = wp.empty((steps + 1, self.run.mesh.n_vertices), dtype=self.shell.scalar)
+                self._ws = wp.empty_like(self._cs) if self.sensitive else None
             self._graphs.clear()
 
     def centre(self) -> float:
@@ -225,6 +245,7 @@ class WalkAdjoint:
     def walk(self, steps: int) -> float:
         """Advance the run `steps` chemistry steps as its own coupled steps do; returns J (the distance walked, in R)."""
         start = self.centre()
+        self._place_surface()
         self._run(self._coupled_step, int(steps), "forward")
         self._advance_clocks(steps)
         return self.centre() - start
@@ -248,7 +269,7 @@ class WalkAdjoint:
             raise WalkerGradientError(f"steps {steps}: the walk needs at least one chemistry step")
         every = self.checkpoint_every or checkpoint_spacing(
             steps, self.coupled.substeps, sum(a.capacity for a in self._state_arrays()),
-            2 * self.dynamics.state.x.capacity, self.wave.c.capacity)
+            2 * self.dynamics.state.x.capacity, self.wave.c.capacity * (2 if self.sensitive else 1))
         if every < 1:
             raise WalkerGradientError(f"checkpoint_every {every}: give at least 1 chemistry step")
         every = min(int(every), steps)
@@ -258,6 +279,8 @@ class WalkAdjoint:
         self._ensure_rows(every * substeps + 1, every)
         self._placement = np.zeros(len(GROUND_PARAMETERS))
         start = self.centre()
+        self._place_surface()
+        x_start = self.dynamics.state.x.numpy().astype(np.float64)
         for index, first in enumerate(range(0, steps, every)):
             for store, live in zip(checkpoints, self._state_arrays()):
                 wp.copy(store[index], live)
@@ -271,18 +294,30 @@ class WalkAdjoint:
         self._ground_gradient.zero_()
         for contact in self._contacts.values():
             contact.gradient.zero_()
+        if self.sensitive:
+            self._wave_adjoint.zero()
         for index in reversed(range(len(checkpoints[0]))):
             self._backward_stretch([store[index] for store in checkpoints], min(every, steps - index * every))
         for live, saved in zip(self._state_arrays(), end):  # the run is left at the walk's end
             wp.copy(live, saved)
         self.shell.update_reference(self.wave.c)
+        self._place_surface()
         self._advance_clocks(steps)
         x_hat = s["x_hat"].numpy().astype(np.float64) - self._seed.numpy()
         start_gradient = {"x": x_hat, "v": s["v_hat"].numpy().astype(np.float64)}
+        if self.sensitive:
+            start_gradient["c"] = self._wave_adjoint.c_hat.numpy().astype(np.float64)
+            start_gradient["w"] = self._wave_adjoint.w_hat.numpy().astype(np.float64)
+        if settle and self.sensitive:  # the pulse starts on the settled surface: c₀ moves with x₀
+            run = self.run
+            sigma = run.resolved["width"] / run.radius
+            x_hat = x_hat + gaussian_pulse_adjoint(run.mesh, x_start, run.origin_vertex, sigma, start_gradient["c"],
+                                                   radius=run.radius)  # fmt: skip
         if settle:
             s["x_hat"].assign(x_hat)
             self._settle_adjoint()
-        state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + self._cs.capacity
+        state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + self._cs.capacity * (
+            2 if self.sensitive else 1)
         return {"objective": objective, "gradient": self._named_gradient(),
                 "start": start_gradient, "steps": steps,
                 "substeps": substeps, "checkpoint_every": every, "checkpoints": len(checkpoints[0]),
@@ -293,27 +328,41 @@ class WalkAdjoint:
         backwards (the device's counters walk the stored rows down)."""
         for live, saved in zip(self._state_arrays(), checkpoint):
             wp.copy(live, saved)
+        self._place_surface()
         for counter in self._counters.values():
             counter.zero_()
         self._run(lambda: self._coupled_step(store=True), count, "recompute")
         eval_push(self.wave.c, self._counters["step"], self._cs)
         self._push_mechanics()  # the stretch's end: the rows count·S of (x, v) and count of c
         eval_count(self._counters["substep"], -1)
+        self._reference_adjoint = self.sensitive
         self._run(self._backward_step, count, "backward")
+        self._reference_adjoint = False
 
     def _backward_step(self) -> None:
         """One chemistry step backwards: its substeps' adjoints, last first, the references ramped as they were."""
-        counters, s = self._counters, self._scratch
+        counters, s, substeps = self._counters, self._scratch, self.coupled.substeps
         eval_count(counters["step"], -1)
         eval_pull(self._cs, counters["step"], 0, self._c_start)
-        eval_pull(self._cs, counters["step"], 1, self._c_end)
-        for k in reversed(range(1, self.coupled.substeps + 1)):
+        if self.sensitive:  # c_end: the step's c̃, before the transport; x̂ gains the end surface's mass share
+            chemistry = self._wave_adjoint
+            eval_pull(self._ws, counters["step"], 0, self._w_start)
+            eval_pull(self._xs, counters["substep"], -substeps, s["x_step"])
+            eval_pull(self._xs, counters["substep"], 0, s["x_step_end"])
+            chemistry.recompute(self._c_start, self._w_start, s["x_step"])
+            wp.copy(self._c_end, chemistry.c_tilde)
+            chemistry.transport_back(s["x_step_end"], s["x_hat"])
+        else:
+            eval_pull(self._cs, counters["step"], 1, self._c_end)
+        for k in reversed(range(1, substeps + 1)):
             eval_count(counters["substep"], -1)
             eval_pull(self._xs, counters["substep"], 0, s["x"])
             eval_pull(self._vs, counters["substep"], 0, s["v"])
             eval_pull(self._vs, counters["substep"], 1, s["v_next"])
             self._set_reference(k)
             self._substep_adjoint(s["x"], s["v"], s["v_next"])
+        if self.sensitive:
+            chemistry.step_back(self._c_start, s["x_step"], s["x_hat"])
 
     def _substep_adjoint(self, x, v, v_next) -> None:
         """x̂, v̂ (after a walk's substep) → before it, and the parameters' gradients (module docstring)."""
@@ -396,7 +445,10 @@ class WalkAdjoint:
         force_hat, gradient = s["force_hat"], self._shell_gradient
         eval_directional_derivative(x, force_hat, ACTION_STEP * shell.edge_length, shell.forces_device, self._largest,
                                     s["probe"], s["plus"], s["minus"], s["x_hat"])  # fmt: skip
-        if any(name in SHELL_PARAMETERS for name in self.wrt):
+        if self._reference_adjoint:
+            shell.rates_device(x, force_hat, self._rates, self._wave_adjoint.by_concentration, self._ramp)
+            eval_shell_parameter_gradient(self._rates, self._factors, gradient)
+        elif any(name in SHELL_PARAMETERS for name in self.wrt):
             shell.rates_device(x, force_hat, self._rates)
             eval_shell_parameter_gradient(self._rates, self._factors, gradient)
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.linalg import spsolve
 
 from .checks import finite, plain, positive
 from .laplace import LaplaceBeltrami
@@ -78,3 +80,21 @@ def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=Non
     dc_dheight = -(1 + math.exp(-delta * k)) * k * e / (1 + e) ** 2
     slope = np.sqrt(np.maximum(0.0, 1 - (normals @ axis) ** 2))
     return operator.control_values(c), operator.control_values(-gamma * dc_dheight * slope)
+
+
+def gaussian_pulse_adjoint(mesh, x, origin: int, sigma, c_hat, *, radius, amplitude=1.0) -> np.ndarray:
+    """(V, 3) x̂ = (∂c0/∂x)ᵀ ĉ of `gaussian_pulse`'s c0 (chord distance from the vertex `origin`) on the limit surface
+    of `mesh` at control positions x (V, 3): c0 = L⁻¹ g with g_I = C0 exp(-|p_I - p_o|² / (2σ²R²)) at the limit
+    points p = L x (L Loop's limit mask), so ĝ = L⁻ᵀ ĉ, p̂_I = -ĝ_I g_I (p_I - p_o) / (σ²R²), p̂_o gains minus their
+    sum, and x̂ = Lᵀ p̂, R held (given, as the walkers give it)."""
+    n = mesh.n_vertices
+    rows, cols, vals = mesh.limit_mask_matrix()
+    limit = csr_matrix((vals, (rows, cols)), shape=(n, n))
+    points = limit @ np.asarray(x, dtype=np.float64)
+    offset = points - points[int(origin)]
+    scale = (positive("sigma", sigma) * positive("radius", radius)) ** 2
+    g = finite("amplitude", amplitude) * np.exp(-np.sum(offset**2, axis=1) / (2.0 * scale))
+    g_hat = spsolve(limit.T.tocsc(), np.asarray(c_hat, dtype=np.float64))
+    points_hat = -(g_hat * g)[:, None] * offset / scale
+    points_hat[int(origin)] -= points_hat.sum(axis=0)
+    return np.asarray(limit.T @ points_hat)

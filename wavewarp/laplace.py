@@ -172,6 +172,11 @@ class LaplaceBeltrami:
             self._assemble()
         self.version += 1
 
+    @property
+    def j_floor(self) -> wp.array:
+        """The floor of j in the stiffness's D at every quadrature point (subdivision): a hundredth of the rest j."""
+        return self._j_floor
+
     def moved_on_device(self) -> None:
         """A captured graph's replay ran `update` on the device: take a new `version`, so that what the host
         derives from the surface (the wave's stability bound, the consistent mass) is refreshed."""

@@ -170,6 +170,7 @@ class Shell:
             self.ref_weight = wp.empty(n_q, dtype=self.scalar, requires_grad=False)
             self._energy = wp.zeros(1, dtype=wp.float64, requires_grad=True)
             self._moments = wp.zeros(worlds, dtype=VolumeMoments, requires_grad=True)
+            self._no_points = (wp.empty(0, dtype=self.scalar),) * 2  # rates_device without per-point outputs
             self._energy_density = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
             self._moment_terms = wp.zeros(max(n_q, mesh.n_vertices), dtype=VolumeMoments, requires_grad=True)
             self._c = wp.zeros(mesh.n_vertices, dtype=self.scalar)
@@ -349,16 +350,19 @@ class Shell:
             penalty = wp.full(self.worlds, 0.5, dtype=wp.float64)
         self._force_terms(x, gradient, None, (zero, zero), target, penalty, True, contact=False)
 
-    def rates_device(self, x: wp.array, direction: wp.array, rates: wp.array) -> None:
+    def rates_device(self, x: wp.array, direction: wp.array, rates: wp.array, by_concentration=None,
+                     ramp: float = 1.0) -> None:  # fmt: skip
         """rates[0] = (Ė_S, Ė_B, Ė_V, ∂(Ė_S + Ė_B)/∂AC, ∂(Ė_S + Ė_B)/∂AI) as x moves along `direction`, at the current
         reference, Koiter's or the bilayer's (one world; kernels/adjoint.py `shell_rates_kernel`): the shell's
-        parameters' share of a gradient."""
+        parameters' share of a gradient. `by_concentration`: two per-quadrature-point arrays (start, end) that gain
+        -∂Ė/∂c_q, (1 - ramp) and ramp of it: the reference's concentrations' adjoint."""
         if self.has_volume:
             self._launch_volume(x, differentiable=False)
+        by_concentration = self._no_points if by_concentration is None else by_concentration
         eval_shell_rates(x, direction, self.reference_c, self.tables.weighted_patch(), self.reference_arrays(),
-                         [self.rest_metric, self.rest_curvature], list(self._moduli), self.poisson, self.AC,
+                         [self.rest_metric, self.rest_curvature], list(self._moduli), self.poisson, self.AC, self.AI,
                          self.bilayer_radius if self.model == "bilayer" else 0.0,
-                         [self._moments, self._target, self._penalty], rates)  # fmt: skip
+                         [self._moments, self._target, self._penalty], rates, by_concentration, ramp)  # fmt: skip
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
