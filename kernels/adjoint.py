@@ -187,6 +187,29 @@ def form_rates(x1: Any, x2: Any, x11: Any, x12: Any, x22: Any, n: Any, j: Any, d
     return a_rate, b_rate, area_rate
 
 
+@wp.func
+def point_rates(
+    x: wp.array(dtype=Any),
+    direction: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    t: int,
+    row: int,
+    inv: Any,
+    metric: Any,
+    curvature: Any,
+):
+    """At a point of triangle t: the strains E, K against the reference (ā, ā⁻¹ = inv, b̄), the point p, x,1, x,2,
+    and as x moves along d: d's value dp, ȧ, ḃ and the area vector's rate (`form_rates`)."""
+    membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
+        x, patch_start, patch_vertices, basis, t, row, inv, metric, curvature
+    )
+    dp, d1, d2, d11, d12, d22 = patch_jet(direction, patch_start, patch_vertices, basis, t, row)
+    a_rate, b_rate, area_rate = form_rates(x1, x2, x11, x12, x22, n, j, d1, d2, d11, d12, d22)
+    return membrane, bending, p, x1, x2, dp, a_rate, b_rate, area_rate
+
+
 @wp.kernel
 def shell_rates_kernel(
     x: wp.array(dtype=Any),
@@ -231,11 +254,9 @@ def shell_rates_kernel(
     if q < ref_weight.shape[0]:
         t, row = basis_row(triangle_type, points_per_triangle, q)
         inv = ref_metric_inv[q]
-        membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
-            x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
+        membrane, bending, p, x1, x2, dp, a_rate, b_rate, area_rate = point_rates(
+            x, direction, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
         )
-        dp, d1, d2, d11, d12, d22 = patch_jet(direction, patch_start, patch_vertices, basis, t, row)
-        a_rate, b_rate, area_rate = form_rates(x1, x2, x11, x12, x22, n, j, d1, d2, d11, d12, d22)
         stretching_weight = stretching_modulus[0] * ref_weight[q]
         bending_weight = bending_modulus[0] * ref_weight[q]
         stretching = stretching_weight * wp.ddot(material_stress(membrane, inv, nu), a_rate)

@@ -200,7 +200,8 @@ def test_walks_the_reverse_mode_does_not_cover_are_refused_with_the_fix(override
 
 def test_the_settlings_replay_from_the_placement_ends_at_the_walks_start_bitwise(half_period):
     run, start, steps = half_period
-    assert np.array_equal(WalkAdjoint(run).replay_settling(), start[-2].numpy())
+    x, v = WalkAdjoint(run).replay_settling()
+    assert np.array_equal(x, start[-2].numpy()) and np.array_equal(v, start[-1].numpy())
 
 
 def whole_run_difference(p, base, name, relative, scene=SPHERE) -> float:
@@ -464,3 +465,46 @@ def test_the_adjoint_horizon_benchmark_writes_its_figures_with_a_finite_growth(t
     assert [row["periods"] for row in result["rows"]] == [0.2, 1.0, 1.2]
     assert all(row["start_sensitivity"] > 0 for row in result["rows"])
     assert math.isfinite(result["growth"]["rate"]) and math.isfinite(result["growth"]["power"])
+
+
+@pytest.mark.parametrize("walker, form", [("half_period", "metric"), ("sensitive_quarter", "curvature")])
+def test_the_rest_forms_gradient_matches_central_differences_of_walks_with_moved_rest_forms(walker, form, request):
+    """dJ/dā⁰ and dJ/db̄⁰ at every quadrature point along a random symmetric move of the shell's rest forms (its mass,
+    volume and placement held), against walks from the same start with the forms moved by ± δ."""
+    run, start, steps = request.getfixturevalue(walker)
+    put(run, start)
+    gradient = WalkAdjoint(run, rest_forms=True).gradient(steps)["rest_forms"][form]
+    rest = {"metric": run.shell.rest_metric, "curvature": run.shell.rest_curvature}[form]
+    base, rng = rest.numpy().copy(), np.random.default_rng(4)
+    move = rng.standard_normal(base.shape)
+    move, step = 0.5 * (move + move.transpose(0, 2, 1)), 1e-4 * float(np.abs(base).max())
+    ends = []
+    for sign in (1.0, -1.0):
+        rest.assign(base + sign * step * move)
+        put(run, start)
+        ends.append(WalkAdjoint(run).walk(steps))
+    rest.assign(base)
+    run.shell.update_reference(run.wave.c)
+    assert np.sum(gradient * move) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)
+
+
+def test_the_rest_forms_gradient_through_the_settling_matches_central_differences_of_whole_runs(half_period):
+    """The same through the settling: each side's walk starts from the settling replayed from the placement with the
+    rest forms moved (the insensitive wave's pulse lies on the rest surface, which they do not move)."""
+    run, start, steps = half_period
+    put(run, start)
+    gradient = WalkAdjoint(run, rest_forms=True).gradient(steps, settle=True)["rest_forms"]["metric"]
+    base, rng = run.shell.rest_metric.numpy().copy(), np.random.default_rng(6)
+    move = rng.standard_normal(base.shape)
+    move, step = 0.5 * (move + move.transpose(0, 2, 1)), 1e-4 * float(np.abs(base).max())
+    ends = []
+    for sign in (1.0, -1.0):
+        run.shell.rest_metric.assign(base + sign * step * move)
+        put(run, start)
+        x, v = WalkAdjoint(run).replay_settling()
+        run.dynamics.state.x.assign(x)
+        run.dynamics.state.v.assign(v)
+        ends.append(WalkAdjoint(run).walk(steps))
+    run.shell.rest_metric.assign(base)
+    run.shell.update_reference(run.wave.c)
+    assert np.sum(gradient * move) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)

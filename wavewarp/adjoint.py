@@ -39,7 +39,7 @@ from .adjoint_contact import ImplicitContactAdjoint
 from .adjoint_settling import SettlingAdjoint
 from .adjoint_wave import WaveAdjoint
 from .coupled import GRAPH_SUBSTEPS
-from .device import run_steps
+from .device import mat22, run_steps
 from .initial import gaussian_pulse_adjoint
 from .kernels.adjoint import (
     ShellRates,
@@ -125,9 +125,11 @@ def checkpoint_spacing(steps: int, substeps: int, checkpoint_bytes: int, row_byt
 
 class WalkAdjoint(SettlingAdjoint):
     """dJ/dθ and dJ/d(x₀, v₀) of a `WalkerRun`'s walk from its current state (module docstring). `wrt`: names of
-    `ADJOINT_PARAMETERS`; `checkpoint_every`: chemistry steps between checkpoints (None: `checkpoint_spacing`'s)."""
+    `ADJOINT_PARAMETERS`; `checkpoint_every`: chemistry steps between checkpoints (None: `checkpoint_spacing`'s);
+    `rest_forms`: also dJ/dā⁰ and dJ/db̄⁰, the shell's rest metric and curvature at every quadrature point (the rest
+    forms' share of a rest shape's gradient: its mass, volume and placement held)."""
 
-    def __init__(self, run, wrt=(), checkpoint_every=None):
+    def __init__(self, run, wrt=(), checkpoint_every=None, rest_forms: bool = False):
         check_adjoint_walk(run.p, wrt)
         check_adjoint_shell(run.shell)
         self.run, self.wrt = run, list(wrt)
@@ -173,6 +175,9 @@ class WalkAdjoint(SettlingAdjoint):
         self._wave_adjoint = WaveAdjoint(self.wave, shell.tables) if self.sensitive else None
         self._ramp = 1.0  # the reference's share of c_end at the substep being taken back
         self._reference_adjoint = False  # the walk's substeps hand ĉ back to the wave (sensitive; not the settling)
+        points, m22 = shell.tables.n_quadrature_points, mat22(wp.float64)
+        self._rest_forms_hat = (wp.zeros(points, dtype=m22, device=shell.device),
+                                wp.zeros(points, dtype=m22, device=shell.device)) if rest_forms else None  # fmt: skip
 
     # ---------------------------------------------------------------- the forward walk
     def _state_arrays(self) -> list:
@@ -261,8 +266,9 @@ class WalkAdjoint(SettlingAdjoint):
         """Walk `steps` chemistry steps from the current state (leaving the run at the end), then back: {"objective":
         J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy, at the walk's start), "steps",
         "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the
-        walk's checkpoints and the stored stretch)}. `settle`: the current state is the run's settled start, and the
-        gradient goes on back through the settling (replayed from the placement) to the whole run's."""
+        walk's checkpoints and the stored stretch)}, and with `rest_forms` "rest_forms": {"metric": dJ/dā⁰, "curvature":
+        dJ/db̄⁰} (Q × 2 × 2). `settle`: the current state is the run's settled start, and the gradient goes on back
+        through the settling (replayed from the placement) to the whole run's."""
         steps = int(steps)
         if steps < 1:
             raise WalkerGradientError(f"steps {steps}: the walk needs at least one chemistry step")
@@ -291,6 +297,8 @@ class WalkAdjoint(SettlingAdjoint):
         s["v_hat"].zero_()
         self._shell_gradient.zero_()
         self._ground_gradient.zero_()
+        for hat in self._rest_forms_hat or ():
+            hat.zero_()
         for contact in self._contacts.values():
             contact.gradient.zero_()
         if self.sensitive:
@@ -317,10 +325,14 @@ class WalkAdjoint(SettlingAdjoint):
             self._settle_adjoint()
         state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + self._cs.capacity * (
             2 if self.sensitive else 1)
-        return {"objective": objective, "gradient": self._named_gradient(),
-                "start": start_gradient, "steps": steps,
-                "substeps": substeps, "checkpoint_every": every, "checkpoints": len(checkpoints[0]),
-                "stored_substeps": len(self._xs), "state_bytes": int(state_bytes)}  # fmt: skip
+        result = {"objective": objective, "gradient": self._named_gradient(),
+                  "start": start_gradient, "steps": steps,
+                  "substeps": substeps, "checkpoint_every": every, "checkpoints": len(checkpoints[0]),
+                  "stored_substeps": len(self._xs), "state_bytes": int(state_bytes)}  # fmt: skip
+        if self._rest_forms_hat is not None:
+            result["rest_forms"] = {name: hat.numpy().astype(np.float64)
+                                    for name, hat in zip(("metric", "curvature"), self._rest_forms_hat)}
+        return result
 
     def _backward_stretch(self, checkpoint: list, count: int) -> None:
         """Run `count` chemistry steps again from `checkpoint`, storing c and every substep's (x, v), then take them
@@ -450,6 +462,8 @@ class WalkAdjoint(SettlingAdjoint):
         elif any(name in SHELL_PARAMETERS for name in self.wrt):
             shell.rates_device(x, force_hat, self._rates)
             eval_shell_parameter_gradient(self._rates, self._factors, gradient)
+        if self._rest_forms_hat is not None:
+            shell.rest_forms_rates_device(x, force_hat, *self._rest_forms_hat)
 
     def _explicit_ground_adjoint(self, x, v) -> None:
         """F̂ back to x̂, v̂ through the explicit ground law at the limit points (Lᵀ of its adjoint), and to its

@@ -32,12 +32,14 @@ class SettlingAdjoint:
                 self._contact_of(inertial)
         return list(zip((self._settling[0], self.solver), run.settle_dt, run.settle_steps))
 
-    def replay_settling(self) -> np.ndarray:
+    def replay_settling(self) -> tuple:
         """The run's settling replayed from the placement (the adjoint's forward pass through it, on its own state);
-        returns the settled positions (V × 3 NumPy), the walk's start. Leaves the shell's reference at the wave's c."""
+        returns the settled positions and velocities (V × 3 NumPy each), the walk's start. Leaves the shell's reference
+        at the wave's c."""
         self._settle_forward()
         self.shell.update_reference(self.wave.c)
-        return self._settling[1].x.numpy().astype(np.float64)
+        state = self._settling[1]
+        return state.x.numpy().astype(np.float64), state.v.numpy().astype(np.float64)
 
     def _settle_forward(self) -> list:
         """The settling from the placement at c = 0, each phase from rest: [((solver, dt, steps), (checkpoints,

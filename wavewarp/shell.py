@@ -23,6 +23,7 @@ from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.adjoint import eval_shell_rates
+from .kernels.adjoint_rest import eval_rest_forms_rate
 from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
@@ -363,6 +364,16 @@ class Shell:
                          [self.rest_metric, self.rest_curvature], list(self._moduli), self.poisson, self.AC, self.AI,
                          self.bilayer_radius if self.model == "bilayer" else 0.0,
                          [self._moments, self._target, self._penalty], rates, by_concentration, ramp)  # fmt: skip
+
+    def rest_forms_rates_device(self, x: wp.array, direction: wp.array, metric_hat: wp.array,
+                                curvature_hat: wp.array) -> None:  # fmt: skip
+        """metric_hat_q −= ∂Ė/∂ā⁰_q and curvature_hat_q −= ∂Ė/∂b̄⁰_q at every quadrature point as x moves along
+        `direction`, at the current reference (one world; kernels/adjoint_rest.py): the rest forms' share of a
+        gradient."""
+        bilayer_A = (self.AC / 2 - self.AI) / self.bilayer_radius if self.model == "bilayer" else None
+        eval_rest_forms_rate(x, direction, self.reference_c, self.tables.patch(), self.reference_arrays(),
+                             list(self._moduli), self.poisson, self.AC, self.AI, bilayer_A, metric_hat,
+                             curvature_hat)  # fmt: skip
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
