@@ -1,5 +1,5 @@
 """How the reverse mode's gradient grows with the horizon (issue 31, "chaos, honestly"): on one settled walker with
-the insensitive wave, the exact derivative of the discrete walk J(T) — the distance along the wave after T — with
+the insensitive wave (`--set sensitive=true`: the scenes' own, the wave on the deforming shell), the exact derivative of the discrete walk J(T) — the distance along the wave after T — with
 respect to the start state (‖dJ/dx₀‖, the walk's sensitivity to where it starts) and to the parameters, at
 horizons T from the same settled start, one pass back each. A regular gait's ‖dJ/dx₀‖ grows at most like T; a
 chaotic one's like e^{λT}, which fixes the horizon past which a gradient no longer describes the walk's response
