@@ -5,9 +5,9 @@ per area, explicit with a smooth friction law (k_f finite: the paper's) or impli
 scenes' default: its adjoint in wavewarp/adjoint_contact.py) with the drag in the lab or the body frame, the Koiter
 or the bilayer shell, the sensitive wave (the scenes' default: the chemistry on the moving surface, taken back by
 wavewarp/adjoint_wave.py with the ĉ the substeps' references hand it) or the insensitive one (c(t) is data for the
-mechanics), one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R from the
-walk's start to its end. One pass back gives dJ/dθ for every parameter of
-`ADJOINT_PARAMETERS` asked for and dJ/d(x₀, v₀) of the start state, whatever their number.
+mechanics), one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R
+from the walk's start to its end. One pass back gives dJ/dθ for every parameter of `ADJOINT_PARAMETERS` asked for and
+dJ/d(x₀, v₀) (and with the sensitive wave dJ/d(c₀, w₀)) of the start state, whatever their number.
 
 Per mechanics substep, backwards: ŵ = v̂' + dt x̂', F̂ = ŵ/(ζM); the shell's x̂ += (∂F/∂x)ᵀF̂ = -H F̂ (H symmetric:
 the central difference of the forces along F̂); the ground's law at the limit points is differentiated by hand
@@ -264,7 +264,8 @@ class WalkAdjoint(SettlingAdjoint):
     # ---------------------------------------------------------------- the gradient
     def gradient(self, steps: int, settle: bool = False) -> dict:
         """Walk `steps` chemistry steps from the current state (leaving the run at the end), then back: {"objective":
-        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy, at the walk's start), "steps",
+        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy, at the walk's start; the
+        sensitive wave's "c": dJ/dc₀, "w": dJ/dw₀, V), "steps",
         "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the
         walk's checkpoints and the stored stretch)}, and with `rest_forms` "rest_forms": {"metric": dJ/dā⁰, "curvature":
         dJ/db̄⁰} (Q × 2 × 2). `settle`: the current state is the run's settled start, and the gradient goes on back
