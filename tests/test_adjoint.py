@@ -170,7 +170,7 @@ def test_the_default_checkpoints_hold_the_fewest_bytes_and_leave_the_run_at_the_
     every, substeps = result["checkpoint_every"], run.coupled.substeps
     assert result["checkpoints"] == math.ceil(steps / every) and result["stored_substeps"] == every * substeps + 1
     state = sum(a.capacity for a in walk_state(run))
-    row, c_row = 2 * run.dynamics.state.x.capacity, run.wave.c.capacity
+    row, c_row = 2 * run.dynamics.state.x.capacity, 2 * run.wave.c.capacity  # (x, v) a substep, (c, w) a step
     held = [math.ceil(steps / k) * state + (k * substeps + 1) * row + (k + 1) * c_row for k in range(1, steps + 1)]
     assert result["state_bytes"] == min(held)
     left = run.dynamics.state.x.numpy().copy()
@@ -508,3 +508,27 @@ def test_the_rest_forms_gradient_through_the_settling_matches_central_difference
     run.shell.rest_metric.assign(base)
     run.shell.update_reference(run.wave.c)
     assert np.sum(gradient * move) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)
+
+
+def test_the_insensitive_waves_start_gradient_in_c_and_its_rest_surfaces_share_match_central_differences(half_period):
+    """The wave on the rest surface: dJ/dc₀ along a random direction, and the rest operator's share of dJ/dX̄ (its
+    stiffness and masses moved with the rest shape, nothing else) against walks on an operator moved by ± δ."""
+    run, start, steps = half_period
+    put(run, start)
+    result = WalkAdjoint(run, rest_forms=True).gradient(steps)
+    rng = np.random.default_rng(9)
+    rest = run.mesh.vertices
+    for name, step in (("c", 1e-4), ("rest_operator", 1e-5 * run.radius)):
+        gradient = result["start"]["c"] if name == "c" else result["rest_operator"]
+        direction = rng.standard_normal(gradient.shape)
+        ends = []
+        for sign in (1.0, -1.0):
+            put(run, start)
+            if name == "c":
+                run.wave.state.c.assign(start[0].numpy() + sign * step * direction)
+                run.shell.update_reference(run.wave.c)
+            else:
+                run.operator.update(rest + sign * step * direction)
+            ends.append(WalkAdjoint(run).walk(steps))
+        run.operator.update(rest)
+        assert np.sum(gradient * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5), name

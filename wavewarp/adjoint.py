@@ -4,10 +4,10 @@ The walk the adjoint covers: overdamped mechanics (v' = F/(ζM), x' = x + dt v')
 per area, explicit with a smooth friction law (k_f finite: the paper's) or implicit with any k_f (Coulomb's law, the
 scenes' default: its adjoint in wavewarp/adjoint_contact.py) with the drag in the lab or the body frame, the Koiter
 or the bilayer shell, the sensitive wave (the scenes' default: the chemistry on the moving surface, taken back by
-wavewarp/adjoint_wave.py with the ĉ the substeps' references hand it) or the insensitive one (c(t) is data for the
-mechanics), one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R
+wavewarp/adjoint_wave.py with the ĉ the substeps' references hand it) or the insensitive one (the same on the fixed
+rest surface), one world, float64. The objective is the walk's J, the centre of mass's displacement along the wave in R
 from the walk's start to its end. One pass back gives dJ/dθ for every parameter of `ADJOINT_PARAMETERS` asked for and
-dJ/d(x₀, v₀) (and with the sensitive wave dJ/d(c₀, w₀)) of the start state, whatever their number.
+dJ/d(x₀, v₀, c₀, w₀) of the start state, whatever their number.
 
 Per mechanics substep, backwards: ŵ = v̂' + dt x̂', F̂ = ŵ/(ζM); the shell's x̂ += (∂F/∂x)ᵀF̂ = -H F̂ (H symmetric:
 the central difference of the forces along F̂); the ground's law at the limit points is differentiated by hand
@@ -115,7 +115,7 @@ def check_adjoint_shell(shell) -> None:
 def checkpoint_spacing(steps: int, substeps: int, checkpoint_bytes: int, row_bytes: int, step_bytes: int) -> int:
     """The chemistry steps K between checkpoints that hold the fewest bytes over N = `steps`: ⌈N/K⌉ checkpoints of
     `checkpoint_bytes` and a stretch of K·S + 1 stored substeps of `row_bytes` ((x, v)) and K + 1 steps of
-    `step_bytes` (c). K is of order √(N · checkpoint / (S · row)), the bytes of order √N."""
+    `step_bytes` ((c, w)). K is of order √(N · checkpoint / (S · row)), the bytes of order √N."""
 
     def held(every):
         return math.ceil(steps / every) * checkpoint_bytes + (every * substeps + 1) * row_bytes + (every + 1) * step_bytes
@@ -172,9 +172,12 @@ class WalkAdjoint(SettlingAdjoint):
             self._contact_of(self.solver)
         self._xs = self._vs = self._cs = self._ws = None  # the stretch's stored rows, allocated by `gradient`
         self.sensitive = bool(run.p.sensitive)
-        self._wave_adjoint = WaveAdjoint(self.wave, shell.tables) if self.sensitive else None
+        self._wave_adjoint = WaveAdjoint(self.wave, shell.tables, moving=self.sensitive)
         self._ramp = 1.0  # the reference's share of c_end at the substep being taken back
-        self._reference_adjoint = False  # the walk's substeps hand ĉ back to the wave (sensitive; not the settling)
+        self._reference_adjoint = False  # the walk's substeps hand ĉ back to the wave (not the settling's)
+        with wp.ScopedDevice(shell.device):  # the insensitive wave's surface, and its shape's adjoint
+            self._rest_x = wp.array(run.mesh.vertices, dtype=shell.vec3)
+            self._rest_operator_hat = wp.zeros(n, dtype=shell.vec3)
         points, m22 = shell.tables.n_quadrature_points, mat22(wp.float64)
         self._rest_forms_hat = (wp.zeros(points, dtype=m22, device=shell.device),
                                 wp.zeros(points, dtype=m22, device=shell.device)) if rest_forms else None  # fmt: skip
@@ -205,8 +208,7 @@ class WalkAdjoint(SettlingAdjoint):
         wp.copy(self._c_start, wave.c)
         if store:
             eval_push(wave.c, counters["step"], self._cs)
-            if self.sensitive:
-                eval_push(wave.state.w, counters["step"], self._ws)
+            eval_push(wave.state.w, counters["step"], self._ws)
             eval_count(counters["step"], 1)
         wave.solver.step(wave.state, wave.state, wave.dt)
         wp.copy(self._c_end, wave.c)
@@ -239,7 +241,7 @@ class WalkAdjoint(SettlingAdjoint):
                 self._xs = wp.empty((rows, self.run.mesh.n_vertices), dtype=self.shell.vec3)
                 self._vs = wp.empty_like(self._xs)
                 self._cs = wp.empty((steps + 1, self.run.mesh.n_vertices), dtype=self.shell.scalar)
-                self._ws = wp.empty_like(self._cs) if self.sensitive else None
+                self._ws = wp.empty_like(self._cs)
             self._graphs.clear()
 
     def centre(self) -> float:
@@ -264,18 +266,18 @@ class WalkAdjoint(SettlingAdjoint):
     # ---------------------------------------------------------------- the gradient
     def gradient(self, steps: int, settle: bool = False) -> dict:
         """Walk `steps` chemistry steps from the current state (leaving the run at the end), then back: {"objective":
-        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀} (V × 3 NumPy, at the walk's start; the
-        sensitive wave's "c": dJ/dc₀, "w": dJ/dw₀, V), "steps",
+        J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀ (V × 3 NumPy, at the walk's start), "c":
+        dJ/dc₀, "w": dJ/dw₀ (V)}, "steps",
         "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the
         walk's checkpoints and the stored stretch)}, and with `rest_forms` "rest_forms": {"metric": dJ/dā⁰, "curvature":
-        dJ/db̄⁰} (Q × 2 × 2). `settle`: the current state is the run's settled start, and the gradient goes on back
+        dJ/db̄⁰} (Q × 2 × 2) and, for the insensitive wave, "rest_operator": its rest surface's share of dJ/dX̄ (V × 3). `settle`: the current state is the run's settled start, and the gradient goes on back
         through the settling (replayed from the placement) to the whole run's."""
         steps = int(steps)
         if steps < 1:
             raise WalkerGradientError(f"steps {steps}: the walk needs at least one chemistry step")
         every = self.checkpoint_every or checkpoint_spacing(
             steps, self.coupled.substeps, sum(a.capacity for a in self._state_arrays()),
-            2 * self.dynamics.state.x.capacity, self.wave.c.capacity * (2 if self.sensitive else 1))
+            2 * self.dynamics.state.x.capacity, 2 * self.wave.c.capacity)
         if every < 1:
             raise WalkerGradientError(f"checkpoint_every {every}: give at least 1 chemistry step")
         every = min(int(every), steps)
@@ -302,8 +304,8 @@ class WalkAdjoint(SettlingAdjoint):
             hat.zero_()
         for contact in self._contacts.values():
             contact.gradient.zero_()
-        if self.sensitive:
-            self._wave_adjoint.zero()
+        self._wave_adjoint.zero()
+        self._rest_operator_hat.zero_()
         for index in reversed(range(len(checkpoints[0]))):
             self._backward_stretch([store[index] for store in checkpoints], min(every, steps - index * every))
         for live, saved in zip(self._state_arrays(), end):  # the run is left at the walk's end
@@ -313,9 +315,8 @@ class WalkAdjoint(SettlingAdjoint):
         self._advance_clocks(steps)
         x_hat = s["x_hat"].numpy().astype(np.float64) - self._seed.numpy()
         start_gradient = {"x": x_hat, "v": s["v_hat"].numpy().astype(np.float64)}
-        if self.sensitive:
-            start_gradient["c"] = self._wave_adjoint.c_hat.numpy().astype(np.float64)
-            start_gradient["w"] = self._wave_adjoint.w_hat.numpy().astype(np.float64)
+        start_gradient["c"] = self._wave_adjoint.c_hat.numpy().astype(np.float64)
+        start_gradient["w"] = self._wave_adjoint.w_hat.numpy().astype(np.float64)
         if settle and self.sensitive:  # the pulse starts on the settled surface: c₀ moves with x₀
             run = self.run
             sigma = run.resolved["width"] / run.radius
@@ -324,8 +325,7 @@ class WalkAdjoint(SettlingAdjoint):
         if settle:
             s["x_hat"].assign(x_hat)
             self._settle_adjoint()
-        state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + self._cs.capacity * (
-            2 if self.sensitive else 1)
+        state_bytes = sum(a.capacity for a in checkpoints) + 2 * self._xs.capacity + 2 * self._cs.capacity
         result = {"objective": objective, "gradient": self._named_gradient(),
                   "start": start_gradient, "steps": steps,
                   "substeps": substeps, "checkpoint_every": every, "checkpoints": len(checkpoints[0]),
@@ -333,6 +333,8 @@ class WalkAdjoint(SettlingAdjoint):
         if self._rest_forms_hat is not None:
             result["rest_forms"] = {name: hat.numpy().astype(np.float64)
                                     for name, hat in zip(("metric", "curvature"), self._rest_forms_hat)}
+            if not self.sensitive:
+                result["rest_operator"] = self._rest_operator_hat.numpy().astype(np.float64)
         return result
 
     def _backward_stretch(self, checkpoint: list, count: int) -> None:
@@ -347,25 +349,23 @@ class WalkAdjoint(SettlingAdjoint):
         eval_push(self.wave.c, self._counters["step"], self._cs)
         self._push_mechanics()  # the stretch's end: the rows count·S of (x, v) and count of c
         eval_count(self._counters["substep"], -1)
-        self._reference_adjoint = self.sensitive
+        self._reference_adjoint = True
         self._run(self._backward_step, count, "backward")
         self._reference_adjoint = False
 
     def _backward_step(self) -> None:
         """One chemistry step backwards: its substeps' adjoints, last first, the references ramped as they were."""
-        counters, s, substeps = self._counters, self._scratch, self.coupled.substeps
+        counters, s, substeps, chemistry = self._counters, self._scratch, self.coupled.substeps, self._wave_adjoint
         eval_count(counters["step"], -1)
         eval_pull(self._cs, counters["step"], 0, self._c_start)
-        if self.sensitive:  # c_end: the step's c̃, before the transport; x̂ gains the end surface's mass share
-            chemistry = self._wave_adjoint
-            eval_pull(self._ws, counters["step"], 0, self._w_start)
+        eval_pull(self._ws, counters["step"], 0, self._w_start)
+        if self.sensitive:  # the step's surface and the next; x̂ gains the next surface's mass share
             eval_pull(self._xs, counters["substep"], -substeps, s["x_step"])
             eval_pull(self._xs, counters["substep"], 0, s["x_step_end"])
-            chemistry.recompute(self._c_start, self._w_start, s["x_step"])
-            wp.copy(self._c_end, chemistry.c_tilde)
-            chemistry.transport_back(s["x_step_end"], s["x_hat"])
-        else:
-            eval_pull(self._cs, counters["step"], 1, self._c_end)
+        step_x = s["x_step"] if self.sensitive else self._rest_x
+        chemistry.recompute(self._c_start, self._w_start, step_x)
+        wp.copy(self._c_end, chemistry.c_tilde)  # c̃: before the transport
+        chemistry.transport_back(s["x_step_end"], s["x_hat"])
         for k in reversed(range(1, substeps + 1)):
             eval_count(counters["substep"], -1)
             eval_pull(self._xs, counters["substep"], 0, s["x"])
@@ -373,8 +373,7 @@ class WalkAdjoint(SettlingAdjoint):
             eval_pull(self._vs, counters["substep"], 1, s["v_next"])
             self._set_reference(k)
             self._substep_adjoint(s["x"], s["v"], s["v_next"])
-        if self.sensitive:
-            chemistry.step_back(self._c_start, s["x_step"], s["x_hat"])
+        chemistry.step_back(self._c_start, step_x, s["x_hat"] if self.sensitive else self._rest_operator_hat)
 
     def _substep_adjoint(self, x, v, v_next) -> None:
         """x̂, v̂ (after a walk's substep) → before it, and the parameters' gradients (module docstring)."""

@@ -10,7 +10,8 @@ surface at x_{n+1}:
 masses' adjoints; the mechanics in between add to c̃̂ and ĉ through the ramped reference (`by_start`, `by_end`, per
 quadrature point of the shell, filled by `Shell.rates_device`); the step gives ĉ, ŵ, and the Richardson steps taken
 back give ŷ and M̂; ĉ += K ŷ; and every form's dependence on the positions (K's, M_c's, M's) adds to x̂ at x_n or
-x_{n+1} (kernels/adjoint_wave.py)."""
+x_{n+1} (kernels/adjoint_wave.py). The insensitive wave (`moving=False`) steps on the rest surface and is not
+transported: its forms' dependence on the rest shape adds to the caller's rest-shape accumulator instead."""
 
 from __future__ import annotations
 
@@ -30,15 +31,17 @@ from .kernels.waves import eval_fhn_explicit
 
 
 class WaveAdjoint:
-    """The running adjoints ĉ, ŵ of a `FitzHughNagumo` stepper's explicit steps on the moving surface (module
-    docstring); `shell_tables`: the shell's quadrature (its reference's points, where the mechanics hand back ĉ)."""
+    """The running adjoints ĉ, ŵ of a `FitzHughNagumo` stepper's explicit steps (module docstring); `shell_tables`: the
+    shell's quadrature (its reference's points, where the mechanics hand back ĉ); `moving`: the operator follows the
+    shell (the sensitive wave), else it stays on the rest surface."""
 
-    def __init__(self, wave, shell_tables):
+    def __init__(self, wave, shell_tables, moving: bool = True):
         self.solver, self.operator = wave.solver, wave.operator
         self.dt = wave.dt
         self.shell_tables = shell_tables
         self.corrections = self.solver.mass_corrections
-        self.conservative = self.solver.transport == "conservative"
+        self.moving = bool(moving)
+        self.conservative = self.solver.transport == "conservative" and self.moving
         n, scalar = self.operator.n_vertices, self.operator.scalar
         names = ("c_hat", "w_hat", "c_tilde", "w_tilde", "c_tilde_hat", "w_tilde_hat", "y", "y_hat", "r_hat", "q",
                  "product", "old_mass", "mass", "old_mass_hat", "mass_hat", "produced", "zeros")  # fmt: skip
@@ -63,7 +66,8 @@ class WaveAdjoint:
         """The step from (c, w) on the surface at x again, as the solver took it: c̃, w̃, y, the iterates r_j and
         M_c r_j, and M(x) (the operator is left at x)."""
         op, v, dt = self.operator, self.v, self.dt
-        op.update(x)
+        if self.moving:
+            op.update(x)
         wp.copy(v["old_mass"], op.mass_device)
         op.apply_device(c, v["y"])
         wp.launch(divide_kernel, dim=len(c), inputs=[v["y"], op.mass_device], outputs=[self.iterates[0]],
@@ -101,9 +105,10 @@ class WaveAdjoint:
 
     def step_back(self, c, x, x_hat) -> None:
         """The explicit step on the surface at x backwards (after the mechanics added their reference's share): ĉ, ŵ of
-        the step's start, and x̂ += the forms' and the start mass's share."""
+        the step's start, and x̂ += the forms' and the start mass's share (the rest surface's, fixed: its shape's)."""
         op, v, s = self.operator, self.v, self.solver
-        op.update(x)
+        if self.moving:
+            op.update(x)
         start, end = self.by_concentration
         eval_gather_point_values(end, self.shell_tables, v["c_tilde_hat"])
         eval_fhn_explicit_adjoint(c, v["c_tilde_hat"], v["w_tilde_hat"], s.nu, s.kappa, s.epsilon, s.gamma, self.dt,
