@@ -17,9 +17,9 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .adjoint import point_rates
+from .adjoint import ShellRates, point_rates
 from .limit_surface import basis_row, patch_jet, patch_scalar
-from .shell import material_stress
+from .shell import VolumeMoments, material_stress, volume_about_centroid
 
 
 @wp.func
@@ -125,6 +125,16 @@ def rest_forms_adjoint_kernel(
         wp.atomic_add(x_hat, patch_vertices[start + k], b[1] * t1 + b[2] * t2 + second * n)
 
 
+@wp.kernel
+def volume_target_rate_kernel(rates: wp.array(dtype=ShellRates), moments: wp.array(dtype=VolumeMoments),
+                              n_vertices: int, target: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):  # fmt: skip
+    """out[0] −= ∂Ė/∂V̄ = Ė_V / (V − V̄): E_V = μV (V − V̄)², so Ė_V = 2μV (V − V̄) V̇ and ∂Ė_V/∂V̄ = −2μV V̇ (one
+    world; V = V̄ exactly, a set of measure zero, adds nothing)."""
+    excess = volume_about_centroid(moments[0], n_vertices) - target[0]
+    if excess != wp.float64(0.0):
+        out[0] = out[0] + rates[0][2] / excess
+
+
 _PATCH = dict(basis="vec6[,]")
 declare_overloads(rest_forms_rate_kernel, x="vec3[]", direction="vec3[]", c="scalar[]", ref_metric="mat22[]",
                   ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]",
@@ -152,3 +162,9 @@ def eval_rest_forms_adjoint(x, metric_hat, curvature_hat, tables, x_hat) -> None
     """x̂ += the rest forms' adjoints Â⁰, B̂⁰ taken to the control points at x (`rest_forms_adjoint_kernel`)."""
     wp.launch(rest_forms_adjoint_kernel, dim=len(metric_hat), inputs=[x, metric_hat, curvature_hat, *tables.patch()],
               outputs=[x_hat], device=x.device)  # fmt: skip
+
+
+def eval_volume_target_rate(rates, moments, n_vertices: int, target, out) -> None:
+    """out[0] −= ∂Ė/∂V̄ from `shell_rates_kernel`'s sums and the volume moments at the same x."""
+    wp.launch(volume_target_rate_kernel, dim=1, inputs=[rates, moments, int(n_vertices), target], outputs=[out],
+              device=out.device)  # fmt: skip

@@ -532,3 +532,18 @@ def test_the_insensitive_waves_start_gradient_in_c_and_its_rest_surfaces_share_m
             ends.append(WalkAdjoint(run).walk(steps))
         run.operator.update(rest)
         assert np.sum(gradient * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5), name
+
+
+def test_the_rest_volumes_gradient_matches_central_differences_of_walks_with_a_moved_target(sensitive_quarter):
+    """dJ/dV̄ (the volume term's target, the rest shape's volume) against walks from the same start with V̄ ± δ."""
+    run, start, steps = sensitive_quarter
+    put(run, start)
+    gradient = WalkAdjoint(run, rest_forms=True).gradient(steps)["rest_volume"]
+    base = run.shell.rest_volume
+    step, ends = 1e-4 * base, []
+    for sign in (1.0, -1.0):
+        run.shell.rest_volume = base + sign * step
+        put(run, start)
+        ends.append(WalkAdjoint(run).walk(steps))
+    run.shell.rest_volume = base
+    assert gradient == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)

@@ -114,16 +114,18 @@ def test_the_references_concentration_adjoint_matches_central_differences_of_the
 
 
 def test_the_pulse_adjoint_matches_central_differences_of_the_pulse_on_a_moved_surface():
-    """c₀ = gaussian_pulse on the surface at x: (∂c₀/∂x)ᵀ ĉ along a random direction."""
+    """c₀ = gaussian_pulse on the surface at x: (∂c₀/∂x)ᵀ ĉ along a random direction, and ĉ·∂c₀/∂σ."""
     mesh, rng, x = deformed_sphere(level=1)
     operator = LaplaceBeltrami(mesh, x, device="cpu", dtype="float64")
     c_hat, direction = rng.standard_normal(len(x)), rng.standard_normal(x.shape)
 
-    def pulse(x):
+    def pulse(x, sigma=0.4):
         operator.update(x)
-        return gaussian_pulse(operator, 5, 0.4, gamma=0.2, radius=1.1)[0]
+        return gaussian_pulse(operator, 5, sigma, gamma=0.2, radius=1.1)[0]
 
     step = 1e-6
     ends = [c_hat @ pulse(x + sign * step * direction) for sign in (1.0, -1.0)]
-    x_hat = gaussian_pulse_adjoint(mesh, x, 5, 0.4, c_hat, radius=1.1)
+    x_hat, sigma_hat = gaussian_pulse_adjoint(mesh, x, 5, 0.4, c_hat, radius=1.1)
     assert np.sum(x_hat * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-7)
+    ends = [c_hat @ pulse(x, 0.4 + sign * step) for sign in (1.0, -1.0)]
+    assert sigma_hat == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-7)

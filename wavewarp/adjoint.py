@@ -181,6 +181,7 @@ class WalkAdjoint(SettlingAdjoint):
         points, m22 = shell.tables.n_quadrature_points, mat22(wp.float64)
         self._rest_forms_hat = (wp.zeros(points, dtype=m22, device=shell.device),
                                 wp.zeros(points, dtype=m22, device=shell.device)) if rest_forms else None  # fmt: skip
+        self._rest_volume_hat = wp.zeros(1, dtype=wp.float64, device=shell.device)
 
     # ---------------------------------------------------------------- the forward walk
     def _state_arrays(self) -> list:
@@ -270,7 +271,8 @@ class WalkAdjoint(SettlingAdjoint):
         dJ/dc₀, "w": dJ/dw₀ (V)}, "steps",
         "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the
         walk's checkpoints and the stored stretch)}, and with `rest_forms` "rest_forms": {"metric": dJ/dā⁰, "curvature":
-        dJ/db̄⁰} (Q × 2 × 2) and, for the insensitive wave, "rest_operator": its rest surface's share of dJ/dX̄ (V × 3). `settle`: the current state is the run's settled start, and the gradient goes on back
+        dJ/db̄⁰} (Q × 2 × 2), "rest_volume": dJ/dV̄, "pulse_sigma": dJ/dσ of the pulse's width, and for the insensitive
+        wave "rest_operator" and "rest_pulse": its rest surface's and its pulse's shares of dJ/dX̄ (V × 3). `settle`: the current state is the run's settled start, and the gradient goes on back
         through the settling (replayed from the placement) to the whole run's."""
         steps = int(steps)
         if steps < 1:
@@ -302,6 +304,7 @@ class WalkAdjoint(SettlingAdjoint):
         self._ground_gradient.zero_()
         for hat in self._rest_forms_hat or ():
             hat.zero_()
+        self._rest_volume_hat.zero_()
         for contact in self._contacts.values():
             contact.gradient.zero_()
         self._wave_adjoint.zero()
@@ -317,11 +320,14 @@ class WalkAdjoint(SettlingAdjoint):
         start_gradient = {"x": x_hat, "v": s["v_hat"].numpy().astype(np.float64)}
         start_gradient["c"] = self._wave_adjoint.c_hat.numpy().astype(np.float64)
         start_gradient["w"] = self._wave_adjoint.w_hat.numpy().astype(np.float64)
-        if settle and self.sensitive:  # the pulse starts on the settled surface: c₀ moves with x₀
-            run = self.run
-            sigma = run.resolved["width"] / run.radius
-            x_hat = x_hat + gaussian_pulse_adjoint(run.mesh, x_start, run.origin_vertex, sigma, start_gradient["c"],
-                                                   radius=run.radius)  # fmt: skip
+        run = self.run
+        if settle or self._rest_forms_hat is not None:  # the pulse on the settled surface (sensitive), or the rest one
+            surface = x_start if self.sensitive else run.mesh.vertices
+            pulse_hat, sigma_hat = gaussian_pulse_adjoint(run.mesh, surface, run.origin_vertex,
+                                                          run.resolved["width"] / run.radius, start_gradient["c"],
+                                                          radius=run.radius)  # fmt: skip
+            if settle and self.sensitive:  # c₀ moves with x₀
+                x_hat = x_hat + pulse_hat
         if settle:
             s["x_hat"].assign(x_hat)
             self._settle_adjoint()
@@ -333,6 +339,10 @@ class WalkAdjoint(SettlingAdjoint):
         if self._rest_forms_hat is not None:
             result["rest_forms"] = {name: hat.numpy().astype(np.float64)
                                     for name, hat in zip(("metric", "curvature"), self._rest_forms_hat)}
+            result["rest_volume"] = float(self._rest_volume_hat.numpy()[0])
+            result["pulse_sigma"] = sigma_hat  # σ = width / R
+            if not self.sensitive:
+                result["rest_pulse"] = pulse_hat
             if not self.sensitive:
                 result["rest_operator"] = self._rest_operator_hat.numpy().astype(np.float64)
         return result
@@ -456,14 +466,18 @@ class WalkAdjoint(SettlingAdjoint):
         force_hat, gradient = s["force_hat"], self._shell_gradient
         eval_directional_derivative(x, force_hat, ACTION_STEP * shell.edge_length, shell.forces_device, self._largest,
                                     s["probe"], s["plus"], s["minus"], s["x_hat"])  # fmt: skip
+        rest = self._rest_forms_hat is not None
         if self._reference_adjoint:
             shell.rates_device(x, force_hat, self._rates, self._wave_adjoint.by_concentration, self._ramp)
-            eval_shell_parameter_gradient(self._rates, self._factors, gradient)
-        elif any(name in SHELL_PARAMETERS for name in self.wrt):
+        elif rest or any(name in SHELL_PARAMETERS for name in self.wrt):
             shell.rates_device(x, force_hat, self._rates)
-            eval_shell_parameter_gradient(self._rates, self._factors, gradient)
-        if self._rest_forms_hat is not None:
+        else:
+            return
+        eval_shell_parameter_gradient(self._rates, self._factors, gradient)
+        if rest:
             shell.rest_forms_rates_device(x, force_hat, *self._rest_forms_hat)
+            if shell.has_volume:
+                shell.volume_target_rate_device(self._rates, self._rest_volume_hat)
 
     def _explicit_ground_adjoint(self, x, v) -> None:
         """F̂ back to x̂, v̂ through the explicit ground law at the limit points (Lᵀ of its adjoint), and to its

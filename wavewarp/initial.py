@@ -82,11 +82,11 @@ def steady_front(operator: LaplaceBeltrami, origin, *, k, delta, gamma, axis=Non
     return operator.control_values(c), operator.control_values(-gamma * dc_dheight * slope)
 
 
-def gaussian_pulse_adjoint(mesh, x, origin: int, sigma, c_hat, *, radius, amplitude=1.0) -> np.ndarray:
-    """(V, 3) x̂ = (∂c0/∂x)ᵀ ĉ of `gaussian_pulse`'s c0 (chord distance from the vertex `origin`) on the limit surface
-    of `mesh` at control positions x (V, 3): c0 = L⁻¹ g with g_I = C0 exp(-|p_I - p_o|² / (2σ²R²)) at the limit
-    points p = L x (L Loop's limit mask), so ĝ = L⁻ᵀ ĉ, p̂_I = -ĝ_I g_I (p_I - p_o) / (σ²R²), p̂_o gains minus their
-    sum, and x̂ = Lᵀ p̂, R held (given, as the walkers give it)."""
+def gaussian_pulse_adjoint(mesh, x, origin: int, sigma, c_hat, *, radius, amplitude=1.0) -> tuple:
+    """(x̂ (V, 3), σ̂) = ((∂c0/∂x)ᵀ ĉ, ĉ·∂c0/∂σ) of `gaussian_pulse`'s c0 (chord distance from the vertex `origin`) on
+    the limit surface of `mesh` at control positions x (V, 3): c0 = L⁻¹ g with g_I = C0 exp(-|p_I - p_o|² / (2σ²R²))
+    at the limit points p = L x (L Loop's limit mask), so ĝ = L⁻ᵀ ĉ, p̂_I = -ĝ_I g_I (p_I - p_o) / (σ²R²), p̂_o gains
+    minus their sum, x̂ = Lᵀ p̂ and σ̂ = Σ ĝ_I g_I |p_I - p_o|² / (σ³R²), R held (given, as the walkers give it)."""
     n = mesh.n_vertices
     rows, cols, vals = mesh.limit_mask_matrix()
     limit = csr_matrix((vals, (rows, cols)), shape=(n, n))
@@ -97,4 +97,5 @@ def gaussian_pulse_adjoint(mesh, x, origin: int, sigma, c_hat, *, radius, amplit
     g_hat = spsolve(limit.T.tocsc(), np.asarray(c_hat, dtype=np.float64))
     points_hat = -(g_hat * g)[:, None] * offset / scale
     points_hat[int(origin)] -= points_hat.sum(axis=0)
-    return np.asarray(limit.T @ points_hat)
+    sigma_hat = float(np.sum(g_hat * g * np.sum(offset**2, axis=1))) / (scale * sigma)
+    return np.asarray(limit.T @ points_hat), sigma_hat

@@ -23,7 +23,7 @@ from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
 from .kernels.adjoint import eval_shell_rates
-from .kernels.adjoint_rest import eval_rest_forms_rate
+from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
@@ -374,6 +374,10 @@ class Shell:
         eval_rest_forms_rate(x, direction, self.reference_c, self.tables.patch(), self.reference_arrays(),
                              list(self._moduli), self.poisson, self.AC, self.AI, bilayer_A, metric_hat,
                              curvature_hat)  # fmt: skip
+
+    def volume_target_rate_device(self, rates: wp.array, out: wp.array) -> None:
+        """out[0] −= ∂Ė/∂V̄ (one world) from `rates_device`'s sums, at the x they were taken at (its volume moments)."""
+        eval_volume_target_rate(rates, self._moments, self.mesh.n_vertices, self._target, out)
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
