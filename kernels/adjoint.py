@@ -247,8 +247,9 @@ def shell_rates_kernel(
     (bilayer_radius R > 0: b̄ = Λb̄⁰ - A c ā⁰, Λ = √λ, A = (AC/2 - AI)/R) adds b̄'s share through Λ and A. One thread
     per quadrature point (whole blocks: the threads past them add zero); the first V threads add the volume's
     centroid term -d_I · F_x̄ (kernels/shell.py `volume_centroid_force`). The reference is a function of AC c and AI c,
-    so -∂Ė/∂c_q = -(AC ∂/∂AC + AI ∂/∂AI)/c: where `by_start` holds the points (the sensitive wave's adjoint) it
-    gains (1 - ramp) of it and `by_end` ramp of it (the substep's reference c_start + ramp (c_end - c_start))."""
+    so -∂Ė/∂c_q = -(AC ∂/∂AC + AI ∂/∂AI)/c: where `by_start` holds the points (the wave's adjoint) its first
+    component gains (1 - ramp) of it and `by_end`'s ramp of it (the substep's reference c_start + ramp (c_end -
+    c_start)), as the point factors (s₀, 0, 0) of kernels/laplace.py's gather."""
     q = wp.tid()
     value = ShellRates()
     if q < ref_weight.shape[0]:
@@ -272,8 +273,9 @@ def shell_rates_kernel(
             curvature = -by_a / bilayer_radius
         if by_start.shape[0] > 0:
             by_c = -(AC * metric + AI * curvature)
-            by_start[q] = by_start[q] + (one - ramp) * by_c
-            by_end[q] = by_end[q] + ramp * by_c
+            zero = type(nu)(0.0)
+            by_start[q] = by_start[q] + type(by_start[q])((one - ramp) * by_c, zero, zero)
+            by_end[q] = by_end[q] + type(by_end[q])(ramp * by_c, zero, zero)
         metric = cq * metric
         curvature = cq * curvature
         centroid, pressure = world_volume_terms(x, moments, target, penalty, 1, 0)
@@ -312,7 +314,7 @@ declare_overloads(shell_rates_kernel, x="vec3[]", direction="vec3[]", c="scalar[
                   ref_metric="mat22[]", ref_metric_inv="mat22[]", ref_curvature="mat22[]", ref_weight="scalar[]",
                   rest_metric="mat22[]", rest_curvature="mat22[]", stretching_modulus="scalar[]",
                   bending_modulus="scalar[]", nu="scalar", AC="scalar", AI="scalar", bilayer_radius="scalar",
-                  ramp="scalar", by_start="scalar[]", by_end="scalar[]")
+                  ramp="scalar", by_start="vec3[]", by_end="vec3[]")
 
 
 

@@ -15,7 +15,8 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads, scalar_of
-from .limit_surface import basis_row, entry_point, patch_jet
+from .laplace import gather_point_factors_kernel
+from .limit_surface import basis_row, patch_jet
 
 
 @wp.kernel
@@ -132,30 +133,6 @@ def operator_position_adjoint_kernel(
         wp.atomic_add(x_hat, patch_vertices[start + k], b[1] * t1 + b[2] * t2)
 
 
-@wp.kernel
-def gather_point_values_kernel(
-    values: wp.array(dtype=Any),
-    vertex_entry_start: wp.array(dtype=wp.int32),
-    vertex_entries: wp.array(dtype=wp.int32),
-    entry_triangle: wp.array(dtype=wp.int32),
-    patch_start: wp.array(dtype=wp.int32),
-    triangle_type: wp.array(dtype=wp.int32),
-    basis: wp.array2d(dtype=Any),
-    points_per_triangle: int,
-    out: wp.array(dtype=Any),
-):
-    """out_I += Σ_q N_I(q) values_q over the points of every patch holding I, in table order: the transpose of
-    `patch_scalar` (one thread per vertex, no atomics)."""
-    i = wp.tid()
-    total = out[i]
-    for e in range(vertex_entry_start[i], vertex_entry_start[i + 1]):
-        for point in range(points_per_triangle):
-            q, b = entry_point(vertex_entries[e], point, entry_triangle, patch_start, triangle_type, basis,
-                               points_per_triangle)  # fmt: skip
-            total += b[0] * values[q]
-    out[i] = total
-
-
 _PATCH = dict(basis="vec6[,]")
 declare_overloads(fhn_explicit_adjoint_kernel, c="scalar[]", c_next_hat="scalar[]", w_next_hat="scalar[]", nu="scalar",
                   kappa="scalar", epsilon="scalar", gamma2="scalar", dt="scalar", c_hat="scalar[]", w_hat="scalar[]",
@@ -170,7 +147,6 @@ declare_overloads(add_scaled_kernel, part="scalar[]", scale="scalar", total="sca
 declare_overloads(operator_position_adjoint_kernel, x="vec3[]", u="scalar[]", v="scalar[]", m="scalar[]",
                   stiffness_weight="scalar", mass_weight="scalar", weights="scalar[]", j_floor="scalar[]",
                   x_hat="vec3[]", **_PATCH)  # fmt: skip
-declare_overloads(gather_point_values_kernel, values="scalar[]", out="scalar[]", **_PATCH)
 
 
 # ---------------------------------------------------------------- launchers
@@ -218,9 +194,11 @@ def eval_operator_position_adjoint(x, u, v, m, stiffness_weight: float, mass_wei
               outputs=[x_hat], device=x.device)  # fmt: skip
 
 
-def eval_gather_point_values(values, tables, out) -> None:
-    """out += Nᵀ values: per-point values of a field's adjoint to its control values."""
+def eval_gather_point_factors(factors, tables, scratch, out) -> None:
+    """out += Nᵀ s₀ (kernels/laplace.py's gather of the point factors (s₀, 0, 0); `scratch` a vertex array): per-point
+    values of a field's adjoint to its control values."""
     t = tables
-    wp.launch(gather_point_values_kernel, dim=len(out),
-              inputs=[values, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
-              outputs=[out], device=out.device)  # fmt: skip
+    wp.launch(gather_point_factors_kernel, dim=len(out),
+              inputs=[factors, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis, t.points_per_triangle],
+              outputs=[scratch], device=out.device)  # fmt: skip
+    eval_add_scaled(out, scratch, 1.0)

@@ -13,7 +13,7 @@ from wavewarp.adjoint_wave import WaveAdjoint
 from wavewarp.chemistry import FitzHughNagumoSolver
 from wavewarp.initial import gaussian_pulse, gaussian_pulse_adjoint
 from wavewarp.kernels.adjoint import ShellRates
-from wavewarp.kernels.adjoint_wave import eval_gather_point_values, eval_operator_position_adjoint
+from wavewarp.kernels.adjoint_wave import eval_gather_point_factors, eval_operator_position_adjoint
 from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.shell import Shell
@@ -100,12 +100,12 @@ def test_the_references_concentration_adjoint_matches_central_differences_of_the
     shell = Shell(mesh, 0.05, 3.0, AC=0.3, AI=0.7, volume_penalty=5.0, model=model, dtype="float64", device="cpu")
     c, direction, e = rng.uniform(0.0, 1.0, len(x)), rng.standard_normal(x.shape), rng.standard_normal(len(x))
     points = shell.tables.n_quadrature_points
-    by = (wp.zeros(points, dtype=wp.float64), wp.zeros(points, dtype=wp.float64))
+    by = (wp.zeros(points, dtype=wp.vec3d), wp.zeros(points, dtype=wp.vec3d))
     shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), wp.zeros(1, dtype=ShellRates), by, 0.25)
     gathered = []
     for values in by:
         out = wp.zeros(len(x), dtype=wp.float64)
-        eval_gather_point_values(values, shell.tables, out)
+        eval_gather_point_factors(values, shell.tables, wp.empty_like(out), out)
         gathered.append(out.numpy())
     step = 1e-6
     ends = [np.sum(shell.forces(x, c + sign * step * e) * direction) for sign in (1.0, -1.0)]

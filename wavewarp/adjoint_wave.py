@@ -21,7 +21,7 @@ from .kernels.adjoint_wave import (
     eval_add_scaled,
     eval_divide_adjoint,
     eval_fhn_explicit_adjoint,
-    eval_gather_point_values,
+    eval_gather_point_factors,
     eval_operator_position_adjoint,
     eval_richardson_adjoint,
     eval_transport_adjoint,
@@ -50,7 +50,8 @@ class WaveAdjoint:
             self.iterates = [wp.zeros(n, dtype=scalar) for _ in range(self.corrections + 1)]  # r_0 … r_p
             self.products = [wp.zeros(n, dtype=scalar) for _ in range(self.corrections)]  # M_c r_j
             points = shell_tables.n_quadrature_points
-            self.by_concentration = (wp.zeros(points, dtype=scalar), wp.zeros(points, dtype=scalar))
+            vec3 = self.operator.vec3
+            self.by_concentration = (wp.zeros(points, dtype=vec3), wp.zeros(points, dtype=vec3))  # (s₀, 0, 0)
         shell_tables.vertex_entries()  # built on first use: here, not inside a captured graph
 
     c_hat = property(lambda self: self.v["c_hat"])
@@ -110,7 +111,7 @@ class WaveAdjoint:
         if self.moving:
             op.update(x)
         start, end = self.by_concentration
-        eval_gather_point_values(end, self.shell_tables, v["c_tilde_hat"])
+        eval_gather_point_factors(end, self.shell_tables, v["product"], v["c_tilde_hat"])
         eval_fhn_explicit_adjoint(c, v["c_tilde_hat"], v["w_tilde_hat"], s.nu, s.kappa, s.epsilon, s.gamma, self.dt,
                                   v["c_hat"], v["w_hat"], v["r_hat"])  # fmt: skip
         v["y_hat"].zero_()
@@ -125,4 +126,4 @@ class WaveAdjoint:
         op.apply_device(v["y_hat"], v["product"])
         eval_add_scaled(v["c_hat"], v["product"], 1.0)
         eval_operator_position_adjoint(x, v["y_hat"], c, v["old_mass_hat"], 1.0, 0.0, op.tables, op.j_floor, x_hat)
-        eval_gather_point_values(start, self.shell_tables, v["c_hat"])
+        eval_gather_point_factors(start, self.shell_tables, v["product"], v["c_hat"])

@@ -171,7 +171,7 @@ class Shell:
             self.ref_weight = wp.empty(n_q, dtype=self.scalar, requires_grad=False)
             self._energy = wp.zeros(1, dtype=wp.float64, requires_grad=True)
             self._moments = wp.zeros(worlds, dtype=VolumeMoments, requires_grad=True)
-            self._no_points = (wp.empty(0, dtype=self.scalar),) * 2  # rates_device without per-point outputs
+            self._no_points = (wp.empty(0, dtype=self.vec3),) * 2  # rates_device without per-point outputs
             self._energy_density = wp.zeros(n_q, dtype=wp.float64, requires_grad=True)
             self._moment_terms = wp.zeros(max(n_q, mesh.n_vertices), dtype=VolumeMoments, requires_grad=True)
             self._c = wp.zeros(mesh.n_vertices, dtype=self.scalar)
