@@ -16,7 +16,9 @@ from wavewarp.benchmarks.adjoint_horizon import main as adjoint_horizon
 from wavewarp.benchmarks.inverse_design import main as inverse_design
 from wavewarp.benchmarks.tape_adjoints import LAWS, LawCase
 from wavewarp.cli import main
+from wavewarp.initial import gaussian_pulse
 from wavewarp.kernels.adjoint import ShellRates
+from wavewarp.laplace import LaplaceBeltrami
 from wavewarp.mesh import icosphere
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.shell import Shell
@@ -547,3 +549,30 @@ def test_the_rest_volumes_gradient_matches_central_differences_of_walks_with_a_m
         ends.append(WalkAdjoint(run).walk(steps))
     run.shell.rest_volume = base
     assert gradient == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)
+
+
+def test_the_pulses_width_and_rest_surface_shares_match_central_differences_of_walks_from_moved_pulses(half_period):
+    """dJ/dσ of the initial pulse's width and (the insensitive wave) its rest surface's share of dJ/dX̄: walks from the
+    start with c₀ = the pulse of width σ ± δ, or placed on the rest surface moved by ± δ along a random direction."""
+    run, start, steps = half_period
+    put(run, start)
+    result = WalkAdjoint(run, rest_forms=True).gradient(steps)
+    sigma, rest = run.resolved["width"] / run.radius, run.mesh.vertices
+    surface = LaplaceBeltrami(run.mesh, rest, device="cpu", dtype="float64")
+
+    def walk_from_pulse(x, width):
+        surface.update(x)
+        put(run, start)
+        run.wave.state.c.assign(gaussian_pulse(surface, run.origin_vertex, width, gamma=run.p.gamma,
+                                               radius=run.radius)[0])  # fmt: skip
+        run.shell.update_reference(run.wave.c)
+        return WalkAdjoint(run).walk(steps)
+
+    assert np.array_equal(gaussian_pulse(surface, run.origin_vertex, sigma, gamma=run.p.gamma, radius=run.radius)[0],
+                          start[0].numpy())  # fmt: skip
+    step = 1e-5 * sigma
+    ends = [walk_from_pulse(rest, sigma + sign * step) for sign in (1.0, -1.0)]
+    assert result["pulse_sigma"] == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)
+    direction, step = np.random.default_rng(8).standard_normal(rest.shape), 1e-5 * run.radius
+    ends = [walk_from_pulse(rest + sign * step * direction, sigma) for sign in (1.0, -1.0)]
+    assert np.sum(result["rest_pulse"] * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-5)
