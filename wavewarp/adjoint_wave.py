@@ -1,4 +1,4 @@
-"""The sensitive wave's chemistry step backwards (docs/theory/gradients.md, "The sensitive wave"): the explicit
+"""A walker's chemistry step backwards (docs/theory/gradients.md, "The sensitive wave"): the explicit
 FitzHugh–Nagumo step on the operator at x_n with the mass corrections W_p, then the conservative transport to the
 surface at x_{n+1}:
 
