@@ -16,7 +16,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads
+from . import declare_overloads, scalar_of
 from .adjoint import ShellRates, point_rates
 from .limit_surface import basis_row, patch_jet, patch_scalar
 from .shell import VolumeMoments, material_stress, volume_about_centroid
@@ -151,7 +151,7 @@ def eval_rest_forms_rate(x, direction, c, patch: list, reference: list, moduli: 
                          AC: float, AI: float, bilayer_A, metric_hat, curvature_hat) -> None:  # fmt: skip
     """Â⁰ −= ∂Ė/∂ā⁰, B̂⁰ −= ∂Ė/∂b̄⁰ at every point (`rest_forms_rate_kernel`); `patch` the patch tables, `reference`
     ā, ā⁻¹, b̄, dω̄; bilayer_A None for Koiter's reference, else the bilayer's A."""
-    s = getattr(x.dtype, "_wp_scalar_type_", x.dtype)
+    s = scalar_of(x)
     wp.launch(rest_forms_rate_kernel, dim=len(metric_hat),
               inputs=[x, direction, c, *patch, *reference, *moduli, s(nu), s(AC), s(AI),
                       s(bilayer_A or 0.0), int(bilayer_A is not None)],

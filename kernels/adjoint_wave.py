@@ -16,7 +16,7 @@ import warp as wp
 
 from . import declare_overloads, scalar_of
 from .laplace import gather_point_factors_kernel
-from .limit_surface import basis_row, patch_jet
+from .limit_surface import basis_row, first_form, patch_jet
 
 
 @wp.kernel
@@ -109,7 +109,7 @@ def operator_position_adjoint_kernel(
     uq, u1, u2, u11, u12, u22 = patch_jet(u, patch_start, patch_vertices, basis, t, row)
     vq, v1, v2, v11, v12, v22 = patch_jet(v, patch_start, patch_vertices, basis, t, row)
     mq, m1, m2, m11, m12, m22 = patch_jet(m, patch_start, patch_vertices, basis, t, row)
-    a = wp.matrix(wp.dot(x1, x1), wp.dot(x1, x2), wp.dot(x1, x2), wp.dot(x2, x2), shape=(2, 2))
+    a = first_form(x1, x2)
     j = wp.sqrt(wp.determinant(a))
     w = weights[q % points_per_triangle]
     G = wp.inverse(a)
