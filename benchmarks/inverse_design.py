@@ -1,13 +1,15 @@
 """Inverse design of a walker (issue 31): raise the walk over a horizon by gradient steps on shell
 parameters, the gradient by central differences over one batch (wavewarp/walker_gradients.py) or by the
-reverse mode (`--method adjoint`, wavewarp/adjoint.py: the paper's walker model with the insensitive wave), and
-verify the result by a plain forward run of the scene.
+reverse mode (`--method adjoint`, wavewarp/adjoint.py: the overdamped walkers with either wave, the rest shape's
+control points on the point contact), and verify the result by a plain forward run of the scene.
 
     wavewarp bench inverse_design --scene prism-walker --wrt AC thickness elongation --periods 1 --iterations 8 \\
         --device cuda --out benchmarks/results/inverse_design
     wavewarp bench inverse_design --scene prism-walker --quick --wrt AC thickness --points all --device cuda
     wavewarp bench inverse_design --scene sphere-walker --method adjoint --wrt AC thickness young friction \
         --set sensitive=false --set contact_solve=explicit --set sharpness=0.1 --set level=2 --device cpu
+    wavewarp bench inverse_design --scene prism-walker --quick --method adjoint --wrt AC thickness elongation \
+        --points all --set dt=0.5 --device cpu
 
 The steps are taken in log θ (every parameter stays positive) within a trust region: the most
 sensitive parameter moves by `--rate` of itself; `--points` adds the rest shape's control points, whose
@@ -124,14 +126,13 @@ def main(argv=None) -> int:
     parser.add_argument("--rate", type=float, default=0.2, help="the first step: the most sensitive θ moves by e^rate")
     parser.add_argument("--step", type=float, default=1e-4, help="relative step of the central differences")
     parser.add_argument("--method", default="differences", choices=("differences", "adjoint"),
-                        help="the gradient: central differences over one batch, or the reverse mode (parameters only)")
+                        help="the gradient: central differences over one batch, or the reverse mode (the rest shape on "
+                        "the point contact, with a chemistry step given: --set dt=...)")  # fmt: skip
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed scene parameters")
     parser.add_argument("--device", default=None)
     parser.add_argument("--quick", action="store_true", help="the scene's quick mesh (a CPU smoke run)")
     parser.add_argument("--out", default=".")
     args = parser.parse_args(argv)
-    if args.method == "adjoint" and (args.points or "elongation" in args.wrt):
-        parser.error("--method adjoint designs parameters only: drop --points and elongation, or --method differences")
     device = resolve_device(args.device)
     module = load_scene(args.scene)
     p = resolve(module.Parameters, getattr(module, "QUICK", {}) if args.quick else None,
@@ -149,12 +150,13 @@ def main(argv=None) -> int:
     def objective_and_gradient(theta):
         parameters = {name: theta[name] for name in args.wrt}
         if args.method == "adjoint":
-            result = walker_adjoint_gradient(module, replace(p, **parameters), args.wrt, device=device,
-                                             report=lambda message: None)  # fmt: skip
-            return result["objective"], result["gradient"]
-        result = walker_gradient(module, replace(p, **parameters), args.wrt, points=points, device=device,
-                                 rest_shape=rest_shape(theta), steps=(args.step,),
-                                 report=lambda message: None)  # fmt: skip
+            shaped = Mesh(mesh.vertices + rest_shape(theta), mesh.triangles) if points else None
+            result = walker_adjoint_gradient(module, replace(p, **parameters), args.wrt, points=points, mesh=shaped,
+                                             device=device, report=lambda message: None)  # fmt: skip
+        else:
+            result = walker_gradient(module, replace(p, **parameters), args.wrt, points=points, device=device,
+                                     rest_shape=rest_shape(theta), steps=(args.step,),
+                                     report=lambda message: None)  # fmt: skip
         shape = {name: float(result["shape_gradient"][points.index(i), a]) for name, (i, a) in coordinates.items()}
         return result["objective"], {**result["gradient"], **shape}
 

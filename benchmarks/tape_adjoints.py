@@ -48,6 +48,8 @@ class LawCase:
             self.a = {name: wp.array(value, dtype=wp.vec3d, requires_grad=name in ("p", "u"))
                       for name, value in vectors.items()}  # fmt: skip
             self.response = wp.array(rng.uniform(0.5, 2.0, points), dtype=wp.float64)
+            self.response_move = rng.normal(size=points)
+            self.response_hat = wp.zeros(points, dtype=wp.float64)
             self.normal = wp.zeros(points, dtype=wp.float64, requires_grad=True)
             self.forces = wp.zeros(points, dtype=wp.vec3d, requires_grad=True)
             self.p_hat, self.u_hat = wp.zeros(points, dtype=wp.vec3d), wp.zeros(points, dtype=wp.vec3d)
@@ -81,15 +83,18 @@ class LawCase:
         return result
 
     def hand(self) -> tuple:
-        """p̂, û by the hand-written kernel (it evaluates the law's forward itself)."""
+        """p̂, û by the hand-written kernel (it evaluates the law's forward itself); the implicit laws' r̂ in
+        `response_hat`."""
         p, u, f_hat = self.a["p"], self.a["u"], self.a["f_hat"]
         self.p_hat.zero_()
+        self.response_hat.zero_()
         if self.law == "explicit":
             wp.launch(ground_adjoint_kernel, self.n, inputs=[p, u, f_hat, *[wp.float64(v) for v in (K, BETA, MU, K_F)]],
                       outputs=[self.p_hat, self.u_hat, self.gradient], device=self.device)  # fmt: skip
         else:
             wp.launch(implicit_law_adjoint_kernel, self.n, inputs=[p, u, self.response, *self.laws, f_hat],
-                      outputs=[self.u_hat, self.p_hat, self.gradient], device=self.device)  # fmt: skip
+                      outputs=[self.u_hat, self.p_hat, self.gradient, self.response_hat],
+                      device=self.device)  # fmt: skip
         return self.p_hat.numpy().copy(), self.u_hat.numpy().copy()
 
     def directional_difference(self) -> float:
@@ -100,6 +105,16 @@ class LawCase:
                                 device=self.device) for name in ("p", "u")]  # fmt: skip
             self.forward(*shifted)
             values.append(float(np.sum(self.forces.numpy() * self.a["f_hat"].numpy())))
+        return (values[0] - values[1]) / (2.0 * STEP)
+
+    def response_difference(self) -> float:
+        """(f̂·f(r + εdr) - f̂·f(r - εdr)) / 2ε of the implicit laws, dr a random move of the points' responses."""
+        base, values = self.response.numpy().copy(), []
+        for sign in (1.0, -1.0):
+            self.response.assign(base + sign * STEP * self.response_move)
+            self.forward(self.a["p"], self.a["u"])
+            values.append(float(np.sum(self.forces.numpy() * self.a["f_hat"].numpy())))
+        self.response.assign(base)
         return (values[0] - values[1]) / (2.0 * STEP)
 
     def along_direction(self, adjoint: tuple) -> float:

@@ -9,9 +9,16 @@ import warp as wp
 from . import declare_overloads, scalar_of
 from .limit_surface import basis_row, patch_jet, patch_scalar
 from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
-from .shell import VolumeMoments, koiter_jet, material_stress, volume_centroid_force, world_volume_terms
+from .shell import (
+    VolumeMoments,
+    koiter_jet,
+    material_stress,
+    moments_normal_sum,
+    volume_centroid_force,
+    world_volume_terms,
+)
 
-ShellRates = wp.types.vector(length=5, dtype=wp.float64)  # `shell_rates_kernel`'s five sums
+ShellRates = wp.types.vector(length=6, dtype=wp.float64)  # `shell_rates_kernel`'s six sums
 
 
 @wp.kernel
@@ -241,8 +248,8 @@ def shell_rates_kernel(
     by_start: wp.array(dtype=Any),
     by_end: wp.array(dtype=Any),
 ):
-    """rates[0] += the rates of change of E_S, E_B and E_V as x moves along d, and the derivatives of Ė_S + Ė_B in AC
-    and AI (one world; docs/theory/gradients.md, "Walkers: reverse mode"): with ā = λā⁰ (λ = e^{-AC c}),
+    """rates[0] += the rates of change of E_S, E_B and E_V as x moves along d, the derivatives of Ė_S + Ė_B in AC
+    and AI, and 2μV V̇ (Ė_V per unit of V - V̄: the volume target's share, -∂Ė/∂V̄) (one world; docs/theory/gradients.md, "Walkers: reverse mode"): with ā = λā⁰ (λ = e^{-AC c}),
     ∂/∂AC (Ė_S + Ė_B) = c (Ė_S + Ė_B + S_m ω̄ 2(1+ν) ā⁻¹ : ȧ) per point, and ∂K/∂AI = c ā⁻¹ b̄⁰; the bilayer
     (bilayer_radius R > 0: b̄ = Λb̄⁰ - A c ā⁰, Λ = √λ, A = (AC/2 - AI)/R) adds b̄'s share through Λ and A. One thread
     per quadrature point (whole blocks: the threads past them add zero); the first V threads add the volume's
@@ -279,13 +286,16 @@ def shell_rates_kernel(
         metric = cq * metric
         curvature = cq * curvature
         centroid, pressure = world_volume_terms(x, moments, target, penalty, 1, 0)
-        scale = type(nu)(pressure) * weights[q % points_per_triangle]
-        volume = scale * (wp.dot(dp, wp.cross(x1, x2)) + wp.dot(p - centroid, area_rate))
+        swept = weights[q % points_per_triangle] * (wp.dot(dp, wp.cross(x1, x2)) + wp.dot(p - centroid, area_rate))
+        volume = type(nu)(pressure) * swept
+        unit = type(nu)(wp.float64(2.0) / wp.float64(3.0) * penalty[0]) * swept  # per unit of V - V̄
         if q < x.shape[0]:
             volume = volume - wp.dot(direction[q], type(x[q])(volume_centroid_force(moments, target, penalty,
                                                                                     x.shape[0], q)))  # fmt: skip
+            per_excess = moments_normal_sum(moments[0]) * (wp.float64(2.0) * penalty[0] / wp.float64(x.shape[0]))
+            unit = unit - wp.dot(direction[q], type(x[q])(per_excess))
         value = ShellRates(wp.float64(stretching), wp.float64(bending_rate), wp.float64(volume), wp.float64(metric),
-                           wp.float64(curvature))  # fmt: skip
+                           wp.float64(curvature), wp.float64(unit))  # fmt: skip
     block_add(rates, 0, value)
 
 

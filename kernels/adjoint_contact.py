@@ -136,10 +136,10 @@ def implicit_law_adjoint_kernel(
     p: wp.array(dtype=wp.vec3d), u: wp.array(dtype=wp.vec3d), response: wp.array(dtype=wp.float64),
     scale: wp.float64, dt: wp.float64, k: wp.float64, beta: wp.float64, mu: wp.float64, k_f: wp.float64,
     force_hat: wp.array(dtype=wp.vec3d), u_hat: wp.array(dtype=wp.vec3d), p_hat: wp.array(dtype=wp.vec3d),
-    gradient: wp.array(dtype=wp.float64),
+    gradient: wp.array(dtype=wp.float64), response_hat: wp.array(dtype=wp.float64),
 ):  # fmt: skip
     """The implicit law's adjoint at every point (`law_adjoint`; u the slip velocities) given f̂: u_hat = û
-    (overwritten), p_hat += (0, 0, ẑ), the gradient's slots (`add_law_gradient`)."""
+    (overwritten), p_hat += (0, 0, ẑ), the gradient's slots (`add_law_gradient`), response_hat += the point's r̂."""
     i = wp.tid()
     o_hat, z_hat, grads = law_adjoint(p[i][2], u[i], scale * response[i], dt, k, beta, mu, k_f, force_hat[i],
                                       wp.float64(0.0))  # fmt: skip
@@ -147,6 +147,7 @@ def implicit_law_adjoint_kernel(
     if z_hat != wp.float64(0.0) or wp.length_sq(o_hat) > wp.float64(0.0):
         p_hat[i] = p_hat[i] + wp.vec3d(wp.float64(0.0), wp.float64(0.0), z_hat)
         add_law_gradient(gradient, grads, response[i])
+        response_hat[i] = response_hat[i] + scale * grads[4]
 
 
 @wp.kernel
@@ -179,11 +180,12 @@ def body_step_adjoint_kernel(
     response: wp.array(dtype=wp.float64), weight: wp.array(dtype=wp.float64), scale: wp.float64, dt: wp.float64,
     k: wp.float64, beta: wp.float64, mu: wp.float64, k_f: wp.float64, force_hat: wp.array(dtype=wp.vec3d),
     stiffness_hat: wp.array(dtype=wp.float64), u_hat: wp.array(dtype=wp.vec3d), p_hat: wp.array(dtype=wp.vec3d),
-    gradient: wp.array(dtype=wp.float64), body_hat: wp.array(dtype=wp.vec3d),
+    gradient: wp.array(dtype=wp.float64), body_hat: wp.array(dtype=wp.vec3d), response_hat: wp.array(dtype=wp.float64),
 ):  # fmt: skip
     """Each point's share of a Weiszfeld step's adjoint, given Ĝ and ĥ (`body_step_seeds_kernel`): the point's law at
     slip velocity y = u + U seeded with f̂ = a Ĝ (horizontal) and a ĥ on |f_t|/|y|; u_hat += ŷ, p_hat += ẑ, the
-    gradient's slots, and Û += Σ ŷ's horizontal part (y = u + U). Whole blocks: the threads past the points add zero."""
+    gradient's slots, r̂ (response_hat), and Û += Σ ŷ's horizontal part (y = u + U). Whole blocks: the threads past
+    the points add zero."""
     i = wp.tid()
     value = wp.vec3d()
     if i < p.shape[0]:
@@ -195,6 +197,7 @@ def body_step_adjoint_kernel(
         u_hat[i] = u_hat[i] + y_hat
         p_hat[i] = p_hat[i] + wp.vec3d(zero, zero, z_hat)
         add_law_gradient(gradient, grads, response[i])
+        response_hat[i] = response_hat[i] + scale * grads[4]
         value = wp.vec3d(y_hat[0], y_hat[1], zero)
     block_add(body_hat, 0, value)
 
@@ -210,12 +213,12 @@ def implicit_laws(ground, scale: float, dt: float) -> list:
 
 
 def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, force_hat, u_hat, p_hat,
-                              gradient) -> None:  # fmt: skip
+                              gradient, response_hat) -> None:  # fmt: skip
     """û (overwritten) and p̂ += ẑ of the implicit ground law at every point given f̂; gradient[0..4] += ∂/∂(k, β, μ,
-    k_f, scale) (`implicit_law_adjoint_kernel`; u the slip velocities)."""
+    k_f, scale), response_hat += r̂ (`implicit_law_adjoint_kernel`; u the slip velocities)."""
     wp.launch(implicit_law_adjoint_kernel, dim=len(p), inputs=[p, u, response, *implicit_laws(ground, scale, dt),
                                                                force_hat],
-              outputs=[u_hat, p_hat, gradient], device=p.device)  # fmt: skip
+              outputs=[u_hat, p_hat, gradient, response_hat], device=p.device)  # fmt: skip
 
 
 def eval_horizontal_sum(values, total) -> None:
@@ -225,14 +228,15 @@ def eval_horizontal_sum(values, total) -> None:
 
 
 def eval_body_step_adjoint(ground, p, u, body, response, weight, scale: float, dt: float, sums: list, external,
-                           seeds: list, u_hat, p_hat, gradient, body_hat) -> None:  # fmt: skip
+                           seeds: list, u_hat, p_hat, gradient, body_hat, response_hat) -> None:  # fmt: skip
     """A Weiszfeld step of the body velocity backwards (`body_step_seeds_kernel`, `body_step_adjoint_kernel`): `sums`
     the step's (G - external, h) at U = `body`, `seeds` scratch for (Ĝ, ĥ); body_hat: Û' in, Û out."""
     device = p.device
     wp.launch(body_step_seeds_kernel, dim=1, inputs=[*sums, external, body_hat], outputs=seeds, device=device)
     wp.launch(body_step_adjoint_kernel, dim=whole_blocks(len(p)),
               inputs=[p, u, body, response, weight, *implicit_laws(ground, scale, dt), *seeds],
-              outputs=[u_hat, p_hat, gradient, body_hat], block_dim=REDUCTION_BLOCK, device=device)  # fmt: skip
+              outputs=[u_hat, p_hat, gradient, body_hat, response_hat], block_dim=REDUCTION_BLOCK,
+              device=device)  # fmt: skip
 
 
 def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None:

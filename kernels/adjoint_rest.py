@@ -19,7 +19,7 @@ import warp as wp
 from . import declare_overloads, scalar_of
 from .adjoint import ShellRates, point_rates
 from .limit_surface import basis_row, patch_jet, patch_scalar
-from .shell import VolumeMoments, material_stress, volume_about_centroid
+from .shell import material_stress
 
 
 @wp.func
@@ -126,13 +126,10 @@ def rest_forms_adjoint_kernel(
 
 
 @wp.kernel
-def volume_target_rate_kernel(rates: wp.array(dtype=ShellRates), moments: wp.array(dtype=VolumeMoments),
-                              n_vertices: int, target: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):  # fmt: skip
-    """out[0] −= ∂Ė/∂V̄ = Ė_V / (V − V̄): E_V = μV (V − V̄)², so Ė_V = 2μV (V − V̄) V̇ and ∂Ė_V/∂V̄ = −2μV V̇ (one
-    world; V = V̄ exactly, a set of measure zero, adds nothing)."""
-    excess = volume_about_centroid(moments[0], n_vertices) - target[0]
-    if excess != wp.float64(0.0):
-        out[0] = out[0] + rates[0][2] / excess
+def volume_target_rate_kernel(rates: wp.array(dtype=ShellRates), out: wp.array(dtype=wp.float64)):
+    """out[0] −= ∂Ė/∂V̄: E_V = μV (V − V̄)², so Ė_V = 2μV (V − V̄) V̇ and −∂Ė_V/∂V̄ = 2μV V̇ (`shell_rates_kernel`'s
+    sixth sum; one world)."""
+    out[0] = out[0] + rates[0][5]
 
 
 _PATCH = dict(basis="vec6[,]")
@@ -164,7 +161,6 @@ def eval_rest_forms_adjoint(x, metric_hat, curvature_hat, tables, x_hat) -> None
               outputs=[x_hat], device=x.device)  # fmt: skip
 
 
-def eval_volume_target_rate(rates, moments, n_vertices: int, target, out) -> None:
-    """out[0] −= ∂Ė/∂V̄ from `shell_rates_kernel`'s sums and the volume moments at the same x."""
-    wp.launch(volume_target_rate_kernel, dim=1, inputs=[rates, moments, int(n_vertices), target], outputs=[out],
-              device=out.device)  # fmt: skip
+def eval_volume_target_rate(rates, out) -> None:
+    """out[0] −= ∂Ė/∂V̄ from `shell_rates_kernel`'s sums."""
+    wp.launch(volume_target_rate_kernel, dim=1, inputs=[rates], outputs=[out], device=out.device)

@@ -92,7 +92,7 @@ def test_the_shells_rates_match_the_forces_and_their_differences_in_each_paramet
     shell = Shell(mesh, dtype="float64", device="cpu", **moduli)
     rates = wp.zeros(1, dtype=ShellRates)
     shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), rates)
-    stretching, bending, volume, metric, curvature = rates.numpy()[0]
+    stretching, bending, volume, metric, curvature, per_excess = rates.numpy()[0]
     forces = direction_dot_forces(mesh, x, c, direction, **moduli)
     assert stretching + bending + volume == pytest.approx(-forces, rel=1e-12)
     expected = {"thickness": (stretching + 3 * bending) / moduli["thickness"], "AC": metric, "AI": curvature,
@@ -102,6 +102,14 @@ def test_the_shells_rates_match_the_forces_and_their_differences_in_each_paramet
         ends = [direction_dot_forces(mesh, x, c, direction, **{**moduli, name: moduli[name] + sign * delta})
                 for sign in (1.0, -1.0)]  # fmt: skip
         assert -rate == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-6), name
+    for target in (shell.rest_volume, shell._volume_of(wp.array(x, dtype=wp.vec3d))):  # V̄, and V̄ = V(x) exactly
+        ends = []
+        for sign in (1.0, -1.0):
+            shell.rest_volume = target + sign * 1e-6 * target
+            ends.append(np.sum(shell.forces(x, c) * direction))
+        shell.rest_volume = target
+        shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), rates)
+        assert rates.numpy()[0][5] == pytest.approx((ends[0] - ends[1]) / (2e-6 * target), rel=1e-6)
 
 
 @pytest.mark.parametrize("law", LAWS)
@@ -112,6 +120,9 @@ def test_the_ground_laws_adjoints_match_a_directional_difference_and_warps_tape(
     case = LawCase(law, 500, device="cpu")
     hand = case.hand()
     assert case.along_direction(hand) == pytest.approx(case.directional_difference(), rel=1e-7)
+    if law != "explicit":  # the implicit law's r̂ (the masses' share through the responses)
+        along = float(np.sum(case.response_hat.numpy() * case.response_move))
+        assert along == pytest.approx(case.response_difference(), rel=1e-7)
     if law != "implicit-tanh":
         taped = case.tape_backward(case.record())
         for mine, warps in zip(hand, taped):
@@ -353,14 +364,15 @@ def test_the_scenes_default_walker_adjoint_matches_central_differences_of_whole_
         assert gradient[name] == pytest.approx(whole_run_difference(p, run, name, 1e-4), rel=1e-5), name
 
 
-def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points(capsys):
+def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points_on_the_area_contact(capsys):
     sets = [arg for item in [*PAPER_WALK, "periods=0.2"] for arg in ("--set", item)]
     assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC,AI", "--json", "--device", "cpu", *sets]) == 0
     result = json.loads(capsys.readouterr().out)
     assert set(result["gradient"]) == {"AC", "AI"} and result["method"] == "adjoint" and not result["start_held"]
     assert all(math.isfinite(value) for value in result["gradient"].values())
-    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", *sets]) != 0
-    assert "--points" in capsys.readouterr().err
+    area = [*sets, "--set", "contact=area"]
+    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", *area]) != 0
+    assert "--set contact=point" in capsys.readouterr().err
 
 
 @pytest.mark.slow

@@ -37,6 +37,7 @@ import warp as wp
 from . import kernels
 from .adjoint_contact import ImplicitContactAdjoint
 from .adjoint_settling import SettlingAdjoint
+from .adjoint_shape import RestShapeAdjoint, check_rest_shape
 from .adjoint_wave import WaveAdjoint
 from .coupled import GRAPH_SUBSTEPS
 from .device import mat22, run_steps
@@ -57,11 +58,13 @@ from .kernels.adjoint import (
 from .kernels.adjoint_contact import eval_ground_adjoint
 from .kernels.contact import ground_motion, spread_to_control_points
 from .kernels.dynamics import eval_reference_ramp
+from .gradients import control_points
 from .walker_gradients import WalkerGradientError
 
 SHELL_PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v")
 GROUND_PARAMETERS = ("stiffness", "contact_damping", "friction", "sharpness")  # kernels/adjoint_contact.py's slots
-ADJOINT_PARAMETERS = SHELL_PARAMETERS + GROUND_PARAMETERS + ("drag",)
+SHAPE_PARAMETERS = ("elongation",)  # through the rest shape's gradient (wavewarp/adjoint_shape.py)
+ADJOINT_PARAMETERS = SHELL_PARAMETERS + GROUND_PARAMETERS + ("drag",) + SHAPE_PARAMETERS
 SETTLE_FREE = ("AC", "AI")  # the walk's start (settled at c = 0) does not depend on them
 ACTION_STEP = 1e-4  # the Hessian action's central difference, in mean edges along the direction's largest component (1e-5: round-off)
 MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
@@ -102,6 +105,8 @@ def check_adjoint_walk(p, wrt) -> None:
                                   "value (--set drag=...) to differentiate β")  # fmt: skip
     if "mu_v" in wrt and p.mu_v == 0:
         raise WalkerGradientError("mu_v = 0: the model has no volume term to differentiate; give mu_v > 0")
+    if any(name in SHAPE_PARAMETERS for name in wrt):
+        check_rest_shape(p)
 
 
 def check_adjoint_shell(shell) -> None:
@@ -123,15 +128,20 @@ def checkpoint_spacing(steps: int, substeps: int, checkpoint_bytes: int, row_byt
     return min(range(1, steps + 1), key=held)
 
 
-class WalkAdjoint(SettlingAdjoint):
+class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
     """dJ/dθ and dJ/d(x₀, v₀) of a `WalkerRun`'s walk from its current state (module docstring). `wrt`: names of
     `ADJOINT_PARAMETERS`; `checkpoint_every`: chemistry steps between checkpoints (None: `checkpoint_spacing`'s);
     `rest_forms`: also dJ/dā⁰ and dJ/db̄⁰, the shell's rest metric and curvature at every quadrature point (the rest
-    forms' share of a rest shape's gradient: its mass, volume and placement held)."""
+    forms' share of a rest shape's gradient: its mass, volume and placement held); `rest_shape`: also dJ/dX of the
+    whole run, X the control points of the run's mesh (wavewarp/adjoint_shape.py; implies `rest_forms`)."""
 
-    def __init__(self, run, wrt=(), checkpoint_every=None, rest_forms: bool = False):
+    def __init__(self, run, wrt=(), checkpoint_every=None, rest_forms: bool = False, rest_shape: bool = False):
         check_adjoint_walk(run.p, wrt)
         check_adjoint_shell(run.shell)
+        rest_shape = rest_shape or any(name in SHAPE_PARAMETERS for name in wrt)
+        if rest_shape:
+            check_rest_shape(run.p)
+        rest_forms = rest_forms or rest_shape
         self.run, self.wrt = run, list(wrt)
         self.checkpoint_every = checkpoint_every
         self.wave, self.dynamics, self.shell = run.wave, run.dynamics, run.shell
@@ -182,6 +192,7 @@ class WalkAdjoint(SettlingAdjoint):
         self._rest_forms_hat = (wp.zeros(points, dtype=m22, device=shell.device),
                                 wp.zeros(points, dtype=m22, device=shell.device)) if rest_forms else None  # fmt: skip
         self._rest_volume_hat = wp.zeros(1, dtype=wp.float64, device=shell.device)
+        self._mass_hat = wp.zeros(n, dtype=wp.float64, device=shell.device) if rest_shape else None  # M̂
 
     # ---------------------------------------------------------------- the forward walk
     def _state_arrays(self) -> list:
@@ -268,15 +279,18 @@ class WalkAdjoint(SettlingAdjoint):
     def gradient(self, steps: int, settle: bool = False) -> dict:
         """Walk `steps` chemistry steps from the current state (leaving the run at the end), then back: {"objective":
         J, "gradient": {name: dJ/dθ}, "start": {"x": dJ/dx₀, "v": dJ/dv₀ (V × 3 NumPy, at the walk's start), "c":
-        dJ/dc₀, "w": dJ/dw₀ (V)}, "steps",
-        "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most held at once), "state_bytes" (the
-        walk's checkpoints and the stored stretch)}, and with `rest_forms` "rest_forms": {"metric": dJ/dā⁰, "curvature":
-        dJ/db̄⁰} (Q × 2 × 2), "rest_volume": dJ/dV̄, "pulse_sigma": dJ/dσ of the pulse's width, and for the insensitive
-        wave "rest_operator" and "rest_pulse": its rest surface's and its pulse's shares of dJ/dX̄ (V × 3). `settle`: the current state is the run's settled start, and the gradient goes on back
-        through the settling (replayed from the placement) to the whole run's."""
+        dJ/dc₀, "w": dJ/dw₀ (V)}, "steps", "substeps", "checkpoint_every", "checkpoints", "stored_substeps" (the most
+        held at once), "state_bytes" (the walk's checkpoints and the stored stretch)}, and with `rest_forms`
+        "rest_forms": {"metric": dJ/dā⁰, "curvature": dJ/db̄⁰} (Q × 2 × 2), "rest_volume": dJ/dV̄, "pulse_sigma": dJ/dσ
+        of the pulse's width, and for the insensitive wave "rest_operator" and "rest_pulse": its rest surface's and its
+        pulse's shares of dJ/dX̄ (V × 3); with `rest_shape` "rest_shape": dJ/dX (V × 3, the whole run's). `settle`: the
+        current state is the run's settled start, and the gradient goes on back through the settling (replayed from the
+        placement) to the whole run's."""
         steps = int(steps)
         if steps < 1:
             raise WalkerGradientError(f"steps {steps}: the walk needs at least one chemistry step")
+        if self._mass_hat is not None and not settle:
+            raise WalkerGradientError("the rest shape's gradient is the whole run's: take it with settle=True")
         every = self.checkpoint_every or checkpoint_spacing(
             steps, self.coupled.substeps, sum(a.capacity for a in self._state_arrays()),
             2 * self.dynamics.state.x.capacity, 2 * self.wave.c.capacity)
@@ -296,6 +310,7 @@ class WalkAdjoint(SettlingAdjoint):
                 wp.copy(store[index], live)
             self._run(self._coupled_step, min(every, steps - first), "forward")
         objective = self.centre() - start
+        x_end = self.dynamics.state.x.numpy().astype(np.float64)
         end = [wp.clone(a) for a in self._state_arrays()]
         s = self._scratch
         wp.copy(s["x_hat"], self._seed)
@@ -305,6 +320,8 @@ class WalkAdjoint(SettlingAdjoint):
         for hat in self._rest_forms_hat or ():
             hat.zero_()
         self._rest_volume_hat.zero_()
+        if self._mass_hat is not None:
+            self._mass_hat.zero_()
         for contact in self._contacts.values():
             contact.gradient.zero_()
         self._wave_adjoint.zero()
@@ -345,6 +362,12 @@ class WalkAdjoint(SettlingAdjoint):
                 result["rest_pulse"] = pulse_hat
             if not self.sensitive:
                 result["rest_operator"] = self._rest_operator_hat.numpy().astype(np.float64)
+        if self._mass_hat is not None:
+            placement_hat = self._scratch["x_hat"].numpy().astype(np.float64)
+            result["rest_shape"] = self._rest_shape_gradient(x_start, x_end, placement_hat, result)
+            if "elongation" in self.wrt:  # x⁰ = s∘X + lift ẑ: dJ/ds = Σ x̂⁰_x X_x = Σ X̂_x x⁰_x / s²
+                stretched = float(result["rest_shape"][:, 0] @ run.mesh.vertices[:, 0])
+                result["gradient"]["elongation"] = stretched / run.p.elongation**2
         return result
 
     def _backward_stretch(self, checkpoint: list, count: int) -> None:
@@ -399,6 +422,8 @@ class WalkAdjoint(SettlingAdjoint):
             self._overdamped_adjoint(x, v_next, dt)
         else:
             self._inertial_adjoint(solver, x, v, dt)
+        if self._mass_hat is not None:
+            self._mass_share(solver, x, v, dt)
         self._shell_adjoint(x)
         if not solver.implicit:
             self._explicit_ground_adjoint(x, v)
@@ -422,7 +447,7 @@ class WalkAdjoint(SettlingAdjoint):
         pts = self._points
         self._gather(solver, s["a_ctrl"], pts["a"], weighted=True)
         pts["p_hat"].zero_()
-        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"], s["w_hat"])
+        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"], s["w_hat"], self._mass_hat)
         wp.copy(s["v_star_hat"], s["w_hat"])
         self._spread(solver, pts["u_star_hat"], s["v_star_hat"])
         self._spread(solver, pts["p_hat"], s["x_hat"])
@@ -448,7 +473,7 @@ class WalkAdjoint(SettlingAdjoint):
         """velocity = (F/M + g - a_rigid)/ζ backwards from its adjoint w_hat: F̂ = ŵ/(ζM), the drag's -ŵ·velocity/ζ."""
         solver = self.solver
         eval_scaled_inverse_mass(w_hat, solver.inverse_mass, 1.0 / solver.drag, self._scratch["force_hat"])
-        if "drag" in self.wrt:
+        if "drag" in self.wrt or self._mass_hat is not None:  # the automatic drag moves with the masses
             eval_weighted_dot(w_hat, velocity, -1.0 / solver.drag, len(SHELL_PARAMETERS), self._shell_gradient)
 
     def _symplectic_adjoint(self, solver, x, v, dt: float, w_hat) -> None:
@@ -503,6 +528,15 @@ class WalkAdjoint(SettlingAdjoint):
         spread_to_control_points(solver.ground, point_values, solver.mask, self._patch, self._unit_area, out)
 
     def _named_gradient(self) -> dict:
+        values = self._gradients()
+        return {name: float(values[name]) for name in self.wrt if name not in SHAPE_PARAMETERS}
+
+    def _drag_gradient(self) -> float:
+        """dJ/dζ (accumulated with `rest_shape` or "drag" asked for)."""
+        return float(self._gradients()["drag"])
+
+    def _gradients(self) -> dict:
+        """dJ/dθ of every parameter whose share was accumulated."""
         shell = self._shell_gradient.numpy()
         ground = self._ground_gradient.numpy()
         ground[GROUND_PARAMETERS.index("stiffness")] += self._stiffness_placement
@@ -512,21 +546,33 @@ class WalkAdjoint(SettlingAdjoint):
                 shell[-1] -= contact.gradient.numpy()[4] / self.solver.drag**2
         per = self.run.resolved["contact_area"] if self._area is not None else 1.0
         ground[:2] /= per  # the law's k and β are the scene's per contact area
-        values = {**dict(zip(SHELL_PARAMETERS, shell)), "drag": shell[-1], **dict(zip(GROUND_PARAMETERS, ground))}
-        return {name: float(values[name]) for name in self.wrt}
+        return {**dict(zip(SHELL_PARAMETERS, shell)), "drag": shell[-1], **dict(zip(GROUND_PARAMETERS, ground))}
 
 
-def walker_adjoint_gradient(scene, p, wrt, *, hold_start: bool = False, seed: int = 0, checkpoint_every=None,
-                            device=None, report=print) -> dict:  # fmt: skip
+def walker_adjoint_gradient(scene, p, wrt, *, points=(), mesh=None, hold_start: bool = False, seed: int = 0,
+                            checkpoint_every=None, device=None, report=print) -> dict:  # fmt: skip
     """dJ/dθ of a walker `scene` (a scene module: its `build`) at parameters `p` by the reverse mode (float64), J the
     distance walked in R over the whole run: back through the walk and then the settling, replayed from the
     placement (not needed for `SETTLE_FREE` parameters alone: the settling, at c = 0, does not see them).
-    `hold_start`: the walk's derivative with its settled start held. Returns `WalkAdjoint.gradient`'s dict with
-    "start_held" and "period_kinetic"."""
+    `points`: the rest shape's control points (vertex indices of the scene's mesh, or "all") whose dJ/dX is taken
+    (wavewarp/adjoint_shape.py); `mesh`: the scene's mesh in place of its own (a designed rest shape). `hold_start`:
+    the walk's derivative with its settled start held. Returns
+    `WalkAdjoint.gradient`'s dict with "start_held", "period_kinetic" and, with `points`, "points" and
+    "shape_gradient" (P × 3, per unit length)."""
     check_adjoint_walk(p, wrt)
-    if not len(wrt):
-        raise WalkerGradientError(f"--wrt (nothing): name one or more of {', '.join(ADJOINT_PARAMETERS)}")
-    run = scene.build(replace(p, dtype="float64"), device=device, seed=seed, report=report)
-    settle = not hold_start and any(name not in SETTLE_FREE for name in wrt)
-    result = WalkAdjoint(run, wrt, checkpoint_every).gradient(run.frames * run.steps_per_frame, settle=settle)
+    if not (len(wrt) or len(points)):
+        raise WalkerGradientError(f"--wrt (nothing): name one or more of {', '.join(ADJOINT_PARAMETERS)}, or the "
+                                  "rest shape's control points (--points)")  # fmt: skip
+    if len(points) or any(name in SHAPE_PARAMETERS for name in wrt):
+        check_rest_shape(p)
+        if hold_start:
+            raise WalkerGradientError("the rest shape's gradient is the whole run's (the settling sees the shape): "
+                                      "drop --hold-start")  # fmt: skip
+    run = scene.build(replace(p, dtype="float64"), mesh=mesh, device=device, seed=seed, report=report)
+    chosen = control_points(points, run.mesh.n_vertices) if len(points) else []
+    settle = not hold_start and (bool(chosen) or any(name not in SETTLE_FREE for name in wrt))
+    adjoint = WalkAdjoint(run, wrt, checkpoint_every, rest_shape=bool(chosen))
+    result = adjoint.gradient(run.frames * run.steps_per_frame, settle=settle)
+    if chosen:
+        result.update(points=chosen, shape_gradient=result["rest_shape"][chosen])
     return {**result, "start_held": bool(hold_start), "period_kinetic": run.period_kinetic}

@@ -14,6 +14,10 @@ G(U)/h(U) (from 0 in the first pass, from the last pass's U in each sweep), the 
 every control point moves with the final U. Backward: Û starts as Σ_I ŵ_I (horizontal), each law's adjoint adds its
 points' horizontal ô, and each step, taken back from its stored U, gives its points' share through Ĝ = Û'/h and
 ĥ = -Û'·G/h² and adds their horizontal part to Û (kernels/adjoint_contact.py).
+
+The masses (a rest shape's gradient; kernels/adjoint_shape.py): the final v = v* + scale M⁻¹ S f gives M̂_J -=
+scale ŵ_J·(S f)_J / M_J², each sweep M̂_J -= scale (Gᵀô^s)_J·(S f^(s-1))_J / M_J² and r̂_i -= scale ô^s_i·f^(s-1)_i,
+each law its r̂_i; the responses r_i = Σ_J G_iJ (S 1_contact)_J,x / M_J then give M̂_J -= (Gᵀ r̂)_J (S 1_contact)_J,x / M_J².
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from .kernels.adjoint_contact import (
     eval_implicit_law_adjoint,
     implicit_laws,
 )
+from .kernels.adjoint_shape import eval_first_component, eval_inverse_mass_share, eval_response_share
 from .kernels.contact import (
     add_body_velocity_kernel,
     body_friction_sums_kernel,
@@ -69,6 +74,8 @@ class ImplicitContactAdjoint:
             self.forces = [wp.zeros(n, dtype=wp.vec3d) for _ in range(sweeps + 1)]  # f^0 … f^S
             self.others = [wp.zeros(n, dtype=wp.vec3d) for _ in range(sweeps + 1)]  # o^1 … o^S (o^0 = u*)
             self.o_hat, self.f_hat, self.gathered = (wp.zeros(n, dtype=wp.vec3d) for _ in range(3))
+            self.response_hat, self.indicator = wp.zeros(n, dtype=wp.float64), wp.zeros(n, dtype=wp.vec3d)
+            self.spread = wp.zeros(vertices, dtype=wp.vec3d)  # S f of a pass (the masses' share)
         self.frame = solver.body  # kernels/contact.py BodyFrame
         if self.frame.solve:
             first, later = self.frame.iterations
@@ -135,12 +142,23 @@ class ImplicitContactAdjoint:
             solve_body_velocity(frame, self.p, velocities, self.response, laws, 1)
         return iterates[-1]
 
-    def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat, velocity_hat) -> None:
+    def _spread_forces(self, forces) -> None:
+        """self.spread = S forces (the points' forces on the control points)."""
+        self.spread.zero_()
+        spread_to_control_points(self.ground, forces, self.mask, self.patch, None if self.point else self.area,
+                                 self.spread)  # fmt: skip
+
+    def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat, velocity_hat, mass_hat=None) -> None:
         """Given f̂ of the final forces at the points and ŵ (`velocity_hat`) of the control points' final velocities:
         u_star_hat = û* (overwritten), p_hat += ẑ, and `gradient` += ∂/∂(k, β, μ, k_f, scale) of f̂ · f, the final
-        velocity's share of scale included (and, in the body frame, U's: every control point moves with it)."""
-        gradient, laws = self.gradient, implicit_laws(self.ground, scale, dt)
+        velocity's share of scale included (and, in the body frame, U's: every control point moves with it);
+        `mass_hat` (where given) += the masses' share (module docstring)."""
+        gradient, laws, inverse_mass = self.gradient, implicit_laws(self.ground, scale, dt), self.solver.inverse_mass
         eval_weighted_dot(force_hat, self.forces[-1], 1.0 / scale, 4, gradient)  # v = v* + scale M⁻¹ S f
+        self.response_hat.zero_()
+        if mass_hat is not None:
+            self._spread_forces(self.forces[-1])
+            eval_inverse_mass_share(velocity_hat, self.spread, inverse_mass, scale, mass_hat)
         wp.copy(self.f_hat, force_hat)
         u_star_hat.zero_()
         if self.frame.solve:
@@ -154,14 +172,27 @@ class ImplicitContactAdjoint:
                           device=slip.device)  # fmt: skip
                 slip = self.slip
             eval_implicit_law_adjoint(self.ground, self.p, slip, self.response, scale, dt, self.f_hat, self.o_hat,
-                                      p_hat, gradient)  # fmt: skip
+                                      p_hat, gradient, self.response_hat)  # fmt: skip
             if self.frame.solve:
                 self._body_backward(s, velocity, scale, dt, laws, p_hat)
             eval_add(u_star_hat, self.o_hat)
             if s > 0:  # o^s = u* + scale (G M⁻¹ S - r) f^(s-1): f̂^(s-1), then ∂/∂scale
                 self._coupled(self.o_hat, self.zeros, self.no_response, self.ones, scale, self.gathered)
+                if mass_hat is not None:  # self.load = Gᵀ ô^s
+                    eval_response_share(self.o_hat, self.forces[s - 1], scale, self.response_hat)
+                    self._spread_forces(self.forces[s - 1])
+                    eval_inverse_mass_share(self.load, self.spread, inverse_mass, scale, mass_hat)
                 eval_coupling_transpose(self.gathered, self.area, self.response, scale, self.o_hat, self.f_hat)
                 eval_weighted_dot(self.f_hat, self.forces[s - 1], 1.0 / scale, 4, gradient)
+        if mass_hat is not None:  # the responses r = G M⁻¹ S 1_contact
+            wp.launch(contact_indicator_kernel, dim=len(self.p), inputs=[self.p], outputs=[self.indicator],
+                      device=self.p.device)  # fmt: skip
+            self._spread_forces(self.indicator)
+            eval_first_component(self.response_hat, self.gathered)
+            self.load.zero_()
+            spread_to_control_points(self.ground, self.gathered, self.mask, self.patch, None if self.point else self.ones,
+                                     self.load)  # fmt: skip
+            eval_inverse_mass_share(self.load, self.spread, inverse_mass, 1.0, mass_hat)
 
     def _body_backward(self, s: int, velocities, scale: float, dt: float, laws, p_hat) -> None:
         """Pass s's body velocity backwards: Û += the law's horizontal ô, then its Weiszfeld steps, last first, each
@@ -172,4 +203,4 @@ class ImplicitContactAdjoint:
             self._sums(velocities, iterates[step], laws)
             eval_body_step_adjoint(self.ground, self.p, velocities, iterates[step], self.response, self.frame.weight,
                                    scale, dt, self.sums, self.frame.external, self.seeds, self.o_hat, p_hat,
-                                   self.gradient, self.body_hat)  # fmt: skip
+                                   self.gradient, self.body_hat, self.response_hat)  # fmt: skip

@@ -236,10 +236,13 @@ def _gradient(args) -> int:
     if issubclass(module.Parameters, WalkerParameters) and args.method == "adjoint":
         objective = args.objective or WALKER_OBJECTIVES[0]
         check_adjoint_arguments(args, objective)
-        result = walker_adjoint_gradient(module, p, args.wrt, hold_start=args.hold_start, seed=args.seed,
-                                         checkpoint_every=args.checkpoint_every, device=args.device, report=report)
+        result = walker_adjoint_gradient(module, p, args.wrt, points=args.points, hold_start=args.hold_start,
+                                         seed=args.seed, checkpoint_every=args.checkpoint_every, device=args.device,
+                                         report=report)  # fmt: skip
         extra = {"method": "adjoint", "start_held": result["start_held"], "checkpoints": result["checkpoints"],
                  "state_bytes": result["state_bytes"]}  # fmt: skip
+        if args.points:
+            extra["shape_gradient"] = {"points": result["points"], "gradient": result["shape_gradient"].tolist()}
     elif issubclass(module.Parameters, WalkerParameters):
         objective = args.objective or WALKER_OBJECTIVES[0]
         result = walker_gradient(module, p, args.wrt, points=args.points, objective=objective, steps=args.steps,
@@ -286,9 +289,9 @@ def _gradient(args) -> int:
 
 def check_adjoint_arguments(args, objective: str) -> None:
     """Refuse, naming the fix, what --method adjoint does not take."""
-    if objective != WALKER_OBJECTIVES[0] or args.points or args.max_worlds is not None:
-        raise WalkerGradientError("--method adjoint takes the distance objective and parameters only (no --points, "
-                                  "--max-worlds, --objective speed): --method differences for those")  # fmt: skip
+    if objective != WALKER_OBJECTIVES[0] or args.max_worlds is not None:
+        raise WalkerGradientError("--method adjoint takes the distance objective (no --max-worlds, --objective "
+                                  "speed): --method differences for those")  # fmt: skip
 
 
 def _control_points(text: str):
@@ -374,8 +377,9 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                       f"the reported agreement (default {','.join(f'{s:g}' for s in WALKER_STEPS)})")  # fmt: skip
     grad.add_argument("--method", default="differences", choices=("differences", "adjoint"),
                       help="walkers: central differences over one batch (any parameter, the rest shape), or the "
-                      f"reverse mode with checkpoints (one pass for every parameter: {', '.join(ADJOINT_PARAMETERS)}; "
-                      "the overdamped walkers, the sensitive or the insensitive wave)")  # fmt: skip
+                      f"reverse mode with checkpoints (one pass for every parameter: {', '.join(ADJOINT_PARAMETERS)}, "
+                      "and the rest shape's control points on the point contact; the overdamped walkers, the "
+                      "sensitive or the insensitive wave)")  # fmt: skip
     grad.add_argument("--hold-start", action="store_true",
                       help="--method adjoint: the walk's derivative from its settled start held (needed for all but "
                       "AC and AI, which the settling does not see)")  # fmt: skip

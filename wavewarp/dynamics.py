@@ -180,10 +180,13 @@ class InertialSolver:
             return 0.0
         if self.ground.contact == "area":
             return self.ground.damping / self.density
+        return self.ground.damping * float(np.max(self.limit_column_sums() / self.mass))
+
+    def limit_column_sums(self) -> np.ndarray:
+        """(Lᵀ1)_J: the limit mask's column sums, each control point's share of the limit points."""
         m = self.mask
         chi = np.repeat(m.ring_weight.numpy().astype(np.float64), np.diff(m.ring_start.numpy()))
-        column_sums = m.centre_weight.numpy() + np.bincount(m.ring.numpy(), weights=chi, minlength=len(self.mass))
-        return self.ground.damping * float(np.max(column_sums / self.mass))
+        return m.centre_weight.numpy() + np.bincount(m.ring.numpy(), weights=chi, minlength=len(self.mass))
 
     def _zeta(self, omega: float) -> float:
         """The damping ratio of the top mode: the background damping, and the contact's when it is explicit."""
@@ -260,6 +263,15 @@ class InertialSolver:
             self.shell.forces_device(x, self._forces)
             self._rigid_rows(x, v, self.damping > 0)
             self._integrate(x, out, dt, move=False)
+
+    def step_forces(self, x: wp.array, v: wp.array) -> wp.array:
+        """The forces a step at x, v divides by M (`step`'s buffer before the integrator: the shell's and the explicit
+        ground's; with the implicit ground, its predictor's: the shell's alone), in the solver's force buffer."""
+        with wp.ScopedDevice(self.device):
+            self.shell.forces_device(x, self._forces)
+            if not self.implicit:
+                self.contact_forces(x, v)
+        return self._forces
 
     def rigid_motion(self, x: wp.array, v: wp.array) -> wp.array:
         """The rigid-body rows of x, v (kernels/dynamics.py, per world: [N/ΣM, α, centre, v̄, Ω], the first two of the

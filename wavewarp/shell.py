@@ -376,8 +376,8 @@ class Shell:
                              curvature_hat)  # fmt: skip
 
     def volume_target_rate_device(self, rates: wp.array, out: wp.array) -> None:
-        """out[0] −= ∂Ė/∂V̄ (one world) from `rates_device`'s sums, at the x they were taken at (its volume moments)."""
-        eval_volume_target_rate(rates, self._moments, self.mesh.n_vertices, self._target, out)
+        """out[0] −= ∂Ė/∂V̄ (one world) from `rates_device`'s sums."""
+        eval_volume_target_rate(rates, out)
 
     def _force_terms(self, x, forces, energy, moduli, target, penalty, with_volume: bool, contact: bool = True) -> None:
         """forces_device with the elastic moduli (None: the shell's), the per-world volume targets and
