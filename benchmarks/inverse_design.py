@@ -1,7 +1,7 @@
 """Inverse design of a walker (issue 31): raise the walk over a horizon by gradient steps on shell
 parameters, the gradient by central differences over one batch (wavewarp/walker_gradients.py) or by the
 reverse mode (`--method adjoint`, wavewarp/adjoint.py: the overdamped walkers with either wave, the rest shape's
-control points on the point contact), and verify the result by a plain forward run of the scene.
+control points too), and verify the result by a plain forward run of the scene.
 
     wavewarp bench inverse_design --scene prism-walker --wrt AC thickness elongation --periods 1 --iterations 8 \\
         --device cuda --out benchmarks/results/inverse_design
@@ -126,8 +126,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rate", type=float, default=0.2, help="the first step: the most sensitive θ moves by e^rate")
     parser.add_argument("--step", type=float, default=1e-4, help="relative step of the central differences")
     parser.add_argument("--method", default="differences", choices=("differences", "adjoint"),
-                        help="the gradient: central differences over one batch, or the reverse mode (the rest shape on "
-                        "the point contact, with a chemistry step given: --set dt=...)")  # fmt: skip
+                        help="the gradient: central differences over one batch, or the reverse mode (the rest shape "
+                        "with a chemistry step given)")  # fmt: skip
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed scene parameters")
     parser.add_argument("--device", default=None)
     parser.add_argument("--quick", action="store_true", help="the scene's quick mesh (a CPU smoke run)")

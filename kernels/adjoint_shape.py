@@ -1,7 +1,8 @@
-"""Adjoint kernels of the walkers' masses (docs/theory/gradients.md, "The rest shape"), each with its launcher: the
-control points' masses M_J = ρ ∫ N_J dω̄⁰ enter a step through F/M, through the rigid-body motion the inertial
-damping acts relative to, and through the implicit contact's M⁻¹ (its coupling and its points' responses). One
-float64 world; M̂ is the masses' adjoint."""
+"""Adjoint kernels of the walkers' masses and contact weights (docs/theory/gradients.md, "The rest shape"), each with
+its launcher: the control points' masses M_J = ρ ∫ N_J dω̄⁰ enter a step through F/M, through the rigid-body motion
+the inertial damping acts relative to, and through the implicit contact's M⁻¹ (its coupling and its points'
+responses); the area contact's weights a_q = dω̄⁰_q through the spread of its pressures. One float64 world; M̂ and
+â are the masses' and the weights' adjoints."""
 
 import warp as wp
 
@@ -45,6 +46,15 @@ def response_share_kernel(o_hat: wp.array(dtype=wp.vec3d), forces: wp.array(dtyp
 
 
 @wp.kernel
+def point_weight_share_kernel(a: wp.array(dtype=wp.vec3d), b: wp.array(dtype=wp.vec3d),
+                              divisor: wp.array(dtype=wp.float64), weight_hat: wp.array(dtype=wp.float64)):  # fmt: skip
+    """A spread term a_q b_q weighted by the point's a_q backwards into the weights: â_q += a_q·b_q / divisor_q (the
+    divisor undoes a weight already in b, or is 1)."""
+    q = wp.tid()
+    weight_hat[q] = weight_hat[q] + wp.dot(a[q], b[q]) / divisor[q]
+
+
+@wp.kernel
 def first_component_kernel(values: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.vec3d)):
     """out_i = (values_i, 0, 0): a point scalar as the vector the gather's transpose spreads."""
     i = wp.tid()
@@ -69,6 +79,11 @@ def eval_response_share(o_hat, forces, scale: float, response_hat) -> None:
     """r̂ -= scale ô·f (`response_share_kernel`)."""
     wp.launch(response_share_kernel, dim=len(o_hat), inputs=[o_hat, forces, wp.float64(scale)],
               outputs=[response_hat], device=o_hat.device)  # fmt: skip
+
+
+def eval_point_weight_share(a, b, divisor, weight_hat) -> None:
+    """â_q += a_q·b_q / divisor_q (`point_weight_share_kernel`)."""
+    wp.launch(point_weight_share_kernel, dim=len(a), inputs=[a, b, divisor], outputs=[weight_hat], device=a.device)
 
 
 def eval_first_component(values, out) -> None:

@@ -56,6 +56,7 @@ from .kernels.adjoint import (
     eval_weighted_dot,
 )
 from .kernels.adjoint_contact import eval_ground_adjoint
+from .kernels.adjoint_shape import eval_point_weight_share
 from .kernels.contact import ground_motion, spread_to_control_points
 from .kernels.dynamics import eval_reference_ramp
 from .gradients import control_points
@@ -193,6 +194,8 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
                                 wp.zeros(points, dtype=m22, device=shell.device)) if rest_forms else None  # fmt: skip
         self._rest_volume_hat = wp.zeros(1, dtype=wp.float64, device=shell.device)
         self._mass_hat = wp.zeros(n, dtype=wp.float64, device=shell.device) if rest_shape else None  # M̂
+        per_area = rest_shape and self._area is not None  # the area contact's weights' adjoint â
+        self._weight_hat = wp.zeros(len(self._area), dtype=wp.float64, device=shell.device) if per_area else None
 
     # ---------------------------------------------------------------- the forward walk
     def _state_arrays(self) -> list:
@@ -320,8 +323,9 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
         for hat in self._rest_forms_hat or ():
             hat.zero_()
         self._rest_volume_hat.zero_()
-        if self._mass_hat is not None:
-            self._mass_hat.zero_()
+        for hat in (self._mass_hat, self._weight_hat):
+            if hat is not None:
+                hat.zero_()
         for contact in self._contacts.values():
             contact.gradient.zero_()
         self._wave_adjoint.zero()
@@ -447,7 +451,8 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
         pts = self._points
         self._gather(solver, s["a_ctrl"], pts["a"], weighted=True)
         pts["p_hat"].zero_()
-        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"], s["w_hat"], self._mass_hat)
+        contact.backward(pts["a"], scale, dt, pts["u_star_hat"], pts["p_hat"], s["w_hat"], self._mass_hat,
+                         self._weight_hat)  # fmt: skip
         wp.copy(s["v_star_hat"], s["w_hat"])
         self._spread(solver, pts["u_star_hat"], s["v_star_hat"])
         self._spread(solver, pts["p_hat"], s["x_hat"])
@@ -512,6 +517,9 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
         pts = self._points
         ground_motion(ground, x, v, solver.mask, self._patch, pts["p"], pts["u"])
         self._gather(solver, force_hat, pts["a"], weighted=True)
+        if self._weight_hat is not None:  # the pressures' spread a_q f_q: â_q += f_q·(G F̂)_q
+            solver.step_forces(x, v)
+            eval_point_weight_share(solver.ground_forces, pts["a"], self._area, self._weight_hat)
         eval_ground_adjoint(ground, pts["p"], pts["u"], pts["a"], pts["p_hat"], pts["u_hat"], self._ground_gradient)
         self._spread(solver, pts["p_hat"], s["x_hat"])
         self._spread(solver, pts["u_hat"], s["v_hat"])
@@ -537,8 +545,8 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
 
     def _gradients(self) -> dict:
         """dJ/dθ of every parameter whose share was accumulated."""
-        shell = self._shell_gradient.numpy()
-        ground = self._ground_gradient.numpy()
+        shell = self._shell_gradient.numpy().astype(np.float64)  # copies: the device arrays stay as summed
+        ground = self._ground_gradient.numpy().astype(np.float64)
         ground[GROUND_PARAMETERS.index("stiffness")] += self._stiffness_placement
         for key, contact in self._contacts.items():  # the implicit contact's laws; its scale 1/ζ in the walk's solver
             ground = ground + contact.gradient.numpy()[:4]

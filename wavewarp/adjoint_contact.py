@@ -18,6 +18,8 @@ points' horizontal ô, and each step, taken back from its stored U, gives its po
 The masses (a rest shape's gradient; kernels/adjoint_shape.py): the final v = v* + scale M⁻¹ S f gives M̂_J -=
 scale ŵ_J·(S f)_J / M_J², each sweep M̂_J -= scale (Gᵀô^s)_J·(S f^(s-1))_J / M_J² and r̂_i -= scale ô^s_i·f^(s-1)_i,
 each law its r̂_i; the responses r_i = Σ_J G_iJ (S 1_contact)_J,x / M_J then give M̂_J -= (Gᵀ r̂)_J (S 1_contact)_J,x / M_J².
+The area contact's weights a_q (S = Gᵀ diag(a)): â_q += f_q·scale (G M⁻¹ ŵ)_q from the final velocity, f^(s-1)_q·scale
+(G M⁻¹ Gᵀ ô^s)_q from each sweep and 1_contact,q (G M⁻¹ Gᵀ r̂)_q,x from the responses.
 """
 
 from __future__ import annotations
@@ -33,7 +35,12 @@ from .kernels.adjoint_contact import (
     eval_implicit_law_adjoint,
     implicit_laws,
 )
-from .kernels.adjoint_shape import eval_first_component, eval_inverse_mass_share, eval_response_share
+from .kernels.adjoint_shape import (
+    eval_first_component,
+    eval_inverse_mass_share,
+    eval_point_weight_share,
+    eval_response_share,
+)
 from .kernels.contact import (
     add_body_velocity_kernel,
     body_friction_sums_kernel,
@@ -148,17 +155,21 @@ class ImplicitContactAdjoint:
         spread_to_control_points(self.ground, forces, self.mask, self.patch, None if self.point else self.area,
                                  self.spread)  # fmt: skip
 
-    def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat, velocity_hat, mass_hat=None) -> None:
+    def backward(self, force_hat, scale: float, dt: float, u_star_hat, p_hat, velocity_hat, mass_hat=None,
+                 weight_hat=None) -> None:  # fmt: skip
         """Given f̂ of the final forces at the points and ŵ (`velocity_hat`) of the control points' final velocities:
         u_star_hat = û* (overwritten), p_hat += ẑ, and `gradient` += ∂/∂(k, β, μ, k_f, scale) of f̂ · f, the final
         velocity's share of scale included (and, in the body frame, U's: every control point moves with it);
-        `mass_hat` (where given) += the masses' share (module docstring)."""
+        `mass_hat` (where given) += the masses' share, `weight_hat` the area contact's weights' (module docstring;
+        `force_hat` is then scale (G M⁻¹ ŵ)_q a_q)."""
         gradient, laws, inverse_mass = self.gradient, implicit_laws(self.ground, scale, dt), self.solver.inverse_mass
         eval_weighted_dot(force_hat, self.forces[-1], 1.0 / scale, 4, gradient)  # v = v* + scale M⁻¹ S f
         self.response_hat.zero_()
         if mass_hat is not None:
             self._spread_forces(self.forces[-1])
             eval_inverse_mass_share(velocity_hat, self.spread, inverse_mass, scale, mass_hat)
+        if weight_hat is not None:
+            eval_point_weight_share(self.forces[-1], force_hat, self.area, weight_hat)
         wp.copy(self.f_hat, force_hat)
         u_star_hat.zero_()
         if self.frame.solve:
@@ -182,6 +193,8 @@ class ImplicitContactAdjoint:
                     eval_response_share(self.o_hat, self.forces[s - 1], scale, self.response_hat)
                     self._spread_forces(self.forces[s - 1])
                     eval_inverse_mass_share(self.load, self.spread, inverse_mass, scale, mass_hat)
+                if weight_hat is not None:  # self.gathered = scale G M⁻¹ Gᵀ ô^s
+                    eval_point_weight_share(self.forces[s - 1], self.gathered, self.ones, weight_hat)
                 eval_coupling_transpose(self.gathered, self.area, self.response, scale, self.o_hat, self.f_hat)
                 eval_weighted_dot(self.f_hat, self.forces[s - 1], 1.0 / scale, 4, gradient)
         if mass_hat is not None:  # the responses r = G M⁻¹ S 1_contact
@@ -193,6 +206,9 @@ class ImplicitContactAdjoint:
             spread_to_control_points(self.ground, self.gathered, self.mask, self.patch, None if self.point else self.ones,
                                      self.load)  # fmt: skip
             eval_inverse_mass_share(self.load, self.spread, inverse_mass, 1.0, mass_hat)
+            if weight_hat is not None:  # 1_contact (G M⁻¹ Gᵀ r̂)_x
+                self._coupled(self.gathered, self.zeros, self.no_response, self.ones, 1.0, self.o_hat)
+                eval_point_weight_share(self.indicator, self.o_hat, self.ones, weight_hat)
 
     def _body_backward(self, s: int, velocities, scale: float, dt: float, laws, p_hat) -> None:
         """Pass s's body velocity backwards: Û += the law's horizontal ô, then its Weiszfeld steps, last first, each

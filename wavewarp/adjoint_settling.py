@@ -64,7 +64,7 @@ class SettlingAdjoint:
                 self._mechanics_backward(solver, dt, min(every, steps - index * every), state,
                                          [store[index] for store in checkpoints])  # fmt: skip
             self._scratch["v_hat"].zero_()  # each phase starts from rest
-        if "stiffness" in self.wrt:
+        if "stiffness" in self.wrt or self._mass_hat is not None:  # the rest shape: the contact area's share
             self._stiffness_placement = self._placement_stiffness()
         self.shell.update_reference(self.wave.c)
 

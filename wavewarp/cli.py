@@ -378,7 +378,7 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grad.add_argument("--method", default="differences", choices=("differences", "adjoint"),
                       help="walkers: central differences over one batch (any parameter, the rest shape), or the "
                       f"reverse mode with checkpoints (one pass for every parameter: {', '.join(ADJOINT_PARAMETERS)}, "
-                      "and the rest shape's control points on the point contact; the overdamped walkers, the "
+                      "and the rest shape's control points; the overdamped walkers, the "
                       "sensitive or the insensitive wave)")  # fmt: skip
     grad.add_argument("--hold-start", action="store_true",
                       help="--method adjoint: the walk's derivative from its settled start held (needed for all but "

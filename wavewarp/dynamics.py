@@ -273,6 +273,8 @@ class InertialSolver:
                 self.contact_forces(x, v)
         return self._forces
 
+    ground_forces = property(lambda self: self._limit_forces)  # the ground's forces at its points, as last evaluated
+
     def rigid_motion(self, x: wp.array, v: wp.array) -> wp.array:
         """The rigid-body rows of x, v (kernels/dynamics.py, per world: [N/ΣM, α, centre, v̄, Ω], the first two of the
         force buffer as it is): the centre, the mean velocity and the rotation the damping acts relative to."""
