@@ -144,6 +144,7 @@ def test_the_rest_shapes_gradient_is_the_whole_runs():
         WalkAdjoint(run, rest_shape=True).gradient(2)
 
 
+@pytest.mark.slow
 def test_grad_cli_gives_the_rest_shapes_gradient_by_the_reverse_mode(capsys):
     """`wavewarp grad --method adjoint --points`: the JSON's shape gradient is the whole run's dJ/dX at those points,
     as the Python function gives it (the scene's noise included), with the parameters' gradient beside it."""

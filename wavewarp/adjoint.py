@@ -539,12 +539,8 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
         values = self._gradients()
         return {name: float(values[name]) for name in self.wrt if name not in SHAPE_PARAMETERS}
 
-    def _drag_gradient(self) -> float:
-        """dJ/dζ (accumulated with `rest_shape` or "drag" asked for)."""
-        return float(self._gradients()["drag"])
-
     def _gradients(self) -> dict:
-        """dJ/dθ of every parameter whose share was accumulated."""
+        """dJ/dθ of every parameter whose share was accumulated (ζ's: with "drag" asked for, or the rest shape)."""
         shell = self._shell_gradient.numpy().astype(np.float64)  # copies: the device arrays stay as summed
         ground = self._ground_gradient.numpy().astype(np.float64)
         ground[GROUND_PARAMETERS.index("stiffness")] += self._stiffness_placement

@@ -92,7 +92,7 @@ class RestShapeAdjoint:
         if self._weight_hat is None and p.drag == 0:  # ζ = 2β max_J (Lᵀ1)_J / M_J
             column_sums = self.solver.limit_column_sums()
             top = int(np.argmax(column_sums / mass))
-            mass_hat[top] -= self.solver.drag / mass[top] * self._drag_gradient()
+            mass_hat[top] -= self.solver.drag / mass[top] * self._gradients()["drag"]
         if self._weight_hat is not None and p.contact_area == 0:  # k, β per area a / V; ζ = 2β/(per ρ) where automatic
             gradients, per = self._gradients(), run.resolved["contact_area"]
             per_hat = -(gradients["stiffness"] * p.stiffness + gradients["contact_damping"] * p.contact_damping) / per
@@ -135,8 +135,9 @@ class RestShapeAdjoint:
         (module docstring; with the area contact Σ a pen stands for Σ pen, and Σ pen² da / (2 Σ a pen) is added)."""
         mesh, ground = self.run.mesh, self.solver.ground
         lowering_hat = float(np.sum(self._scratch["x_hat"].numpy()[:, 2]))
+        limit_z = limit_positions(mesh, device="cpu", dtype="float64")[:, 2]
         if ground.contact == "point":
-            z, weights = limit_positions(mesh, device="cpu", dtype="float64")[:, 2], np.ones(mesh.n_vertices)
+            z, weights = limit_z, np.ones(mesh.n_vertices)
         else:
             surface = limit_surface(mesh, rule=AREA_RULE, device="cpu", dtype="float64")
             z, weights = surface.points[:, 2], surface.area
@@ -146,8 +147,7 @@ class RestShapeAdjoint:
         limit = sparse.csr_matrix((vals, (rows, cols)), shape=(mesh.n_vertices, mesh.n_vertices))
         heights_hat = np.zeros((mesh.n_vertices, 3))
         if held == 0:  # no depth: the lowest limit point touches the ground
-            heights_hat[:, 2] = -lowering_hat * limit[int(np.argmin(limit_positions(mesh, device="cpu",
-                                                                                    dtype="float64")[:, 2]))].toarray().ravel()  # fmt: skip
+            heights_hat[:, 2] = -lowering_hat * limit[int(np.argmin(limit_z))].toarray().ravel()
             out.assign(out.numpy() + heights_hat)
             return 0.0
         if ground.contact == "point":
