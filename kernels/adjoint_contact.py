@@ -7,6 +7,7 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads, scalar_of
+from .contact import friction_magnitude, friction_slope_at_rest, implicit_normal_force
 from .contact import slip_speed as slip_root
 from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
 
@@ -181,11 +182,13 @@ def body_step_adjoint_kernel(
     k: wp.float64, beta: wp.float64, mu: wp.float64, k_f: wp.float64, force_hat: wp.array(dtype=wp.vec3d),
     stiffness_hat: wp.array(dtype=wp.float64), u_hat: wp.array(dtype=wp.vec3d), p_hat: wp.array(dtype=wp.vec3d),
     gradient: wp.array(dtype=wp.float64), body_hat: wp.array(dtype=wp.vec3d), response_hat: wp.array(dtype=wp.float64),
+    weight_hat: wp.array(dtype=wp.float64),
 ):  # fmt: skip
     """Each point's share of a Weiszfeld step's adjoint, given Ĝ and ĥ (`body_step_seeds_kernel`): the point's law at
     slip velocity y = u + U seeded with f̂ = a Ĝ (horizontal) and a ĥ on |f_t|/|y|; u_hat += ŷ, p_hat += ẑ, the
-    gradient's slots, r̂ (response_hat), and Û += Σ ŷ's horizontal part (y = u + U). Whole blocks: the threads past
-    the points add zero."""
+    gradient's slots, r̂ (response_hat), and Û += Σ ŷ's horizontal part (y = u + U); where `weight_hat` has the
+    points, their weights' adjoint â_q += Ĝ·f_t,q + ĥ |f_t,q|/|y_q| (the law's slope at rest where y = 0). Whole
+    blocks: the threads past the points add zero."""
     i = wp.tid()
     value = wp.vec3d()
     if i < p.shape[0]:
@@ -199,6 +202,17 @@ def body_step_adjoint_kernel(
         add_law_gradient(gradient, grads, response[i])
         response_hat[i] = response_hat[i] + scale * grads[4]
         value = wp.vec3d(y_hat[0], y_hat[1], zero)
+        if weight_hat.shape[0] > 0:
+            r = scale * response[i]
+            fn = implicit_normal_force(p[i][2], u[i][2], r, dt, k, beta)
+            if fn > zero:
+                slip = wp.vec3d(y[0], y[1], zero)
+                speed = wp.length(slip)
+                share = stiffness_hat[0] * friction_slope_at_rest(r, mu * fn, k_f)
+                if speed > zero:
+                    m = friction_magnitude(speed, r, mu * fn, k_f) / speed
+                    share = stiffness_hat[0] * m - m * wp.dot(force_hat[0], slip)
+                weight_hat[i] = weight_hat[i] + share
     block_add(body_hat, 0, value)
 
 
@@ -228,14 +242,14 @@ def eval_horizontal_sum(values, total) -> None:
 
 
 def eval_body_step_adjoint(ground, p, u, body, response, weight, scale: float, dt: float, sums: list, external,
-                           seeds: list, u_hat, p_hat, gradient, body_hat, response_hat) -> None:  # fmt: skip
+                           seeds: list, u_hat, p_hat, gradient, body_hat, response_hat, weight_hat) -> None:  # fmt: skip
     """A Weiszfeld step of the body velocity backwards (`body_step_seeds_kernel`, `body_step_adjoint_kernel`): `sums`
     the step's (G - external, h) at U = `body`, `seeds` scratch for (Ĝ, ĥ); body_hat: Û' in, Û out."""
     device = p.device
     wp.launch(body_step_seeds_kernel, dim=1, inputs=[*sums, external, body_hat], outputs=seeds, device=device)
     wp.launch(body_step_adjoint_kernel, dim=whole_blocks(len(p)),
               inputs=[p, u, body, response, weight, *implicit_laws(ground, scale, dt), *seeds],
-              outputs=[u_hat, p_hat, gradient, body_hat, response_hat], block_dim=REDUCTION_BLOCK,
+              outputs=[u_hat, p_hat, gradient, body_hat, response_hat, weight_hat], block_dim=REDUCTION_BLOCK,
               device=device)  # fmt: skip
 
 

@@ -364,15 +364,15 @@ def test_the_scenes_default_walker_adjoint_matches_central_differences_of_whole_
         assert gradient[name] == pytest.approx(whole_run_difference(p, run, name, 1e-4), rel=1e-5), name
 
 
-def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points_in_the_area_contacts_body_frame(capsys):
+def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points_in_the_body_frame_on_a_slope(capsys):
     sets = [arg for item in [*PAPER_WALK, "periods=0.2"] for arg in ("--set", item)]
     assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC,AI", "--json", "--device", "cpu", *sets]) == 0
     result = json.loads(capsys.readouterr().out)
     assert set(result["gradient"]) == {"AC", "AI"} and result["method"] == "adjoint" and not result["start_held"]
     assert all(math.isfinite(value) for value in result["gradient"].values())
-    area = [*sets, *[arg for item in ["contact=area", *COULOMB, "drag_frame=body"] for arg in ("--set", item)]]
-    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", *area]) != 0
-    assert "drag_frame=lab or contact=point" in capsys.readouterr().err
+    slope = [*sets, *[arg for item in [*COULOMB, "drag_frame=body", "slope=5"] for arg in ("--set", item)]]
+    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", *slope]) != 0
+    assert "slope=0 or drag_frame=lab" in capsys.readouterr().err
 
 
 @pytest.mark.slow
@@ -437,8 +437,8 @@ def test_inverse_design_by_the_reverse_mode_raises_the_walk_and_a_plain_run_conf
     result = json.loads((tmp_path / "inverse_design.json").read_text())
     assert result["method"] == "adjoint" and result["best"]["J"] > result["history"][0]["J"]
     assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-12)  # the same plain run
-    body = ["--set", "contact=area", "--set", "contact_solve=implicit", "--set", "sharpness=inf", "--set",
-            "drag_frame=body"]  # the rest shape's reverse mode refuses the area contact's body frame, before any run
+    body = ["--set", "slope=5", "--set", "contact_solve=implicit", "--set", "sharpness=inf", "--set",
+            "drag_frame=body"]  # the rest shape's reverse mode refuses the body frame on a slope, before any run
     with pytest.raises(WalkerGradientError, match="drag_frame=lab"):
         inverse_design(["--method", "adjoint", "--wrt", "AC", "--points", "0", "--out", str(tmp_path), *body])
 

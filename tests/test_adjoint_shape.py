@@ -48,13 +48,15 @@ def shape_difference(p, mesh, options, base, direction, step) -> float:
     pytest.param([*COULOMB, "drag_frame=body", "elongation=1.3"], 0.0, 1e-5, id="body-stretched",
                  marks=pytest.mark.slow),
     pytest.param(["contact=area", "drag=0"], 0.0, 1e-7, id="area-explicit", marks=pytest.mark.slow),
-    pytest.param(["contact=area", *COULOMB], 0.0, 1e-7, id="area-coulomb", marks=pytest.mark.slow)])  # fmt: skip
+    pytest.param(["contact=area", *COULOMB], 0.0, 1e-7, id="area-coulomb", marks=pytest.mark.slow),
+    pytest.param(["contact=area", *COULOMB, "drag_frame=body"], 0.0, 1e-7, id="area-body", marks=pytest.mark.slow)])  # fmt: skip
 def test_the_rest_shapes_gradient_matches_central_differences_of_whole_runs_from_moved_meshes(overrides, noise, step):
     """dJ/dX · d against whole runs from X ± δd: the placement, the settling, the rest forms and volume, the pulse's
     width, the wave's rest surface and pulse (insensitive), the masses through every step, the implicit contact and
     the objective, the automatic drag (on a mesh whose vertices' shares of the limit points are not tied: a tie is
     a kink of its max), the stretch, and on the area contact its points' weights dω̄⁰ (the spread of the
-    pressures, the responses, the placement) and the contact area per point a/V that k and β are given per. δ is relative to R; the walk's contact switches (a point entering the
+    pressures, the responses, the placement, the body frame's friction balance) and the contact area per point a/V
+    that k and β are given per. δ is relative to R; the walk's contact switches (a point entering the
     contact) make J piecewise smooth, so the cells near one take a smaller step."""
     p = resolve(SPHERE.Parameters, {}, [*PAPER_WALK, *overrides])
     mesh, options = SPHERE.recipe(p, report=quiet)
@@ -125,7 +127,6 @@ def test_the_mean_edges_gradient_matches_central_differences():
 
 
 @pytest.mark.parametrize("overrides, message", [
-    (["contact=area", *COULOMB, "drag_frame=body"], "drag_frame=lab or contact=point"),
     (["dt=0"], "give the chemistry step a value"),
     (["slope=5", *COULOMB, "drag_frame=body", "contact=point"], "slope=0 or drag_frame=lab")])  # fmt: skip
 def test_the_rest_shapes_reverse_mode_refuses_what_it_does_not_cover(overrides, message):

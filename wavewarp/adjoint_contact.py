@@ -19,7 +19,8 @@ The masses (a rest shape's gradient; kernels/adjoint_shape.py): the final v = v*
 scale ŵ_J·(S f)_J / M_J², each sweep M̂_J -= scale (Gᵀô^s)_J·(S f^(s-1))_J / M_J² and r̂_i -= scale ô^s_i·f^(s-1)_i,
 each law its r̂_i; the responses r_i = Σ_J G_iJ (S 1_contact)_J,x / M_J then give M̂_J -= (Gᵀ r̂)_J (S 1_contact)_J,x / M_J².
 The area contact's weights a_q (S = Gᵀ diag(a)): â_q += f_q·scale (G M⁻¹ ŵ)_q from the final velocity, f^(s-1)_q·scale
-(G M⁻¹ Gᵀ ô^s)_q from each sweep and 1_contact,q (G M⁻¹ Gᵀ r̂)_q,x from the responses.
+(G M⁻¹ Gᵀ ô^s)_q from each sweep, 1_contact,q (G M⁻¹ Gᵀ r̂)_q,x from the responses, and in the body frame Ĝ·f_t,q +
+ĥ |f_t,q|/|y_q| from each Weiszfeld step's sums G = Σ a f_t + external, h = Σ a |f_t|/|y|.
 """
 
 from __future__ import annotations
@@ -82,6 +83,7 @@ class ImplicitContactAdjoint:
             self.others = [wp.zeros(n, dtype=wp.vec3d) for _ in range(sweeps + 1)]  # o^1 … o^S (o^0 = u*)
             self.o_hat, self.f_hat, self.gathered = (wp.zeros(n, dtype=wp.vec3d) for _ in range(3))
             self.response_hat, self.indicator = wp.zeros(n, dtype=wp.float64), wp.zeros(n, dtype=wp.vec3d)
+            self.no_weights = wp.zeros(0, dtype=wp.float64)
             self.spread = wp.zeros(vertices, dtype=wp.vec3d)  # S f of a pass (the masses' share)
         self.frame = solver.body  # kernels/contact.py BodyFrame
         if self.frame.solve:
@@ -185,7 +187,8 @@ class ImplicitContactAdjoint:
             eval_implicit_law_adjoint(self.ground, self.p, slip, self.response, scale, dt, self.f_hat, self.o_hat,
                                       p_hat, gradient, self.response_hat)  # fmt: skip
             if self.frame.solve:
-                self._body_backward(s, velocity, scale, dt, laws, p_hat)
+                weights = self.no_weights if weight_hat is None else weight_hat
+                self._body_backward(s, velocity, scale, dt, laws, p_hat, weights)
             eval_add(u_star_hat, self.o_hat)
             if s > 0:  # o^s = u* + scale (G M⁻¹ S - r) f^(s-1): f̂^(s-1), then ∂/∂scale
                 self._coupled(self.o_hat, self.zeros, self.no_response, self.ones, scale, self.gathered)
@@ -210,13 +213,14 @@ class ImplicitContactAdjoint:
                 self._coupled(self.gathered, self.zeros, self.no_response, self.ones, 1.0, self.o_hat)
                 eval_point_weight_share(self.indicator, self.o_hat, self.ones, weight_hat)
 
-    def _body_backward(self, s: int, velocities, scale: float, dt: float, laws, p_hat) -> None:
+    def _body_backward(self, s: int, velocities, scale: float, dt: float, laws, p_hat, weight_hat) -> None:
         """Pass s's body velocity backwards: Û += the law's horizontal ô, then its Weiszfeld steps, last first, each
-        adding its points' share to ô and Û (Û is then the adjoint of the pass's starting U, the last pass's)."""
+        adding its points' share to ô and Û (Û is then the adjoint of the pass's starting U, the last pass's), and
+        to the points' weights' adjoint where `weight_hat` has them."""
         eval_horizontal_sum(self.o_hat, self.body_hat)
         iterates = self.iterates[s]
         for step in reversed(range(len(iterates) - 1)):
             self._sums(velocities, iterates[step], laws)
             eval_body_step_adjoint(self.ground, self.p, velocities, iterates[step], self.response, self.frame.weight,
                                    scale, dt, self.sums, self.frame.external, self.seeds, self.o_hat, p_hat,
-                                   self.gradient, self.body_hat, self.response_hat)  # fmt: skip
+                                   self.gradient, self.body_hat, self.response_hat, weight_hat)  # fmt: skip

@@ -12,7 +12,8 @@ control points as the lumped mass's derivative (kernels/adjoint_wave.py `operato
 (the lowest point's own move cancels), z_i the ground points' heights, pen_i their depths below the ground, a_i their
 weights (1 on limit points), W = ρ g × the limit surface's area. The area contact's weights a_q = dω̄⁰_q (the spread
 of its pressures, kernels/adjoint_shape.py) reach X as a rest-metric adjoint, and its contact area per point a/V
-through k, β (and an automatic ζ) given per it.
+through k, β (and an automatic ζ) given per it; in the body frame they weigh the friction balance too
+(wavewarp/adjoint_contact.py).
 """
 
 from __future__ import annotations
@@ -35,10 +36,6 @@ AREA_RULE = "3"  # the quadrature of the placement's weight (walker.py `place_wa
 
 def check_rest_shape(p) -> None:
     """Raise WalkerGradientError, naming the fix, where the reverse mode does not give a walker's rest-shape gradient."""
-    if p.contact == "area" and p.drag_frame == "body":
-        raise WalkerGradientError("the body frame's friction balance weighs the area contact's points by their areas, "
-                                  "which the rest shape's reverse mode does not take back: --set drag_frame=lab or "
-                                  "contact=point, or take central differences (--method differences)")  # fmt: skip
     if p.dt == 0:
         raise WalkerGradientError("dt = auto follows the rest surface's stability bound, which the rest shape moves: "
                                   "give the chemistry step a value (--set dt=0.5)")  # fmt: skip
