@@ -41,6 +41,7 @@ from .adjoint_shape import RestShapeAdjoint, check_rest_shape
 from .adjoint_wave import WaveAdjoint
 from .coupled import GRAPH_SUBSTEPS
 from .device import mat22, run_steps
+from .gradients import control_points
 from .initial import gaussian_pulse_adjoint
 from .kernels.adjoint import (
     ShellRates,
@@ -59,7 +60,6 @@ from .kernels.adjoint_contact import eval_ground_adjoint
 from .kernels.adjoint_shape import eval_point_weight_share
 from .kernels.contact import ground_motion, spread_to_control_points
 from .kernels.dynamics import eval_reference_ramp
-from .gradients import control_points
 from .walker_gradients import WalkerGradientError
 
 SHELL_PARAMETERS = ("AC", "AI", "thickness", "young", "mu_v")
@@ -430,7 +430,7 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
             self._mass_share(solver, x, v, dt)
         self._shell_adjoint(x)
         if not solver.implicit:
-            self._explicit_ground_adjoint(x, v)
+            self._explicit_ground_adjoint(solver, x, v)
 
     def _contact_of(self, solver) -> ImplicitContactAdjoint:
         if id(solver) not in self._contacts:
@@ -509,16 +509,15 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
             if shell.has_volume:
                 shell.volume_target_rate_device(self._rates, self._rest_volume_hat)
 
-    def _explicit_ground_adjoint(self, x, v) -> None:
+    def _explicit_ground_adjoint(self, solver, x, v) -> None:
         """F̂ back to x̂, v̂ through the explicit ground law at the limit points (Lᵀ of its adjoint), and to its
-        parameters."""
-        s, solver = self._scratch, self.solver
+        parameters (`solver`: the step's)."""
+        s = self._scratch
         force_hat, ground = s["force_hat"], solver.ground
         pts = self._points
         ground_motion(ground, x, v, solver.mask, self._patch, pts["p"], pts["u"])
         self._gather(solver, force_hat, pts["a"], weighted=True)
-        if self._weight_hat is not None:  # the pressures' spread a_q f_q: â_q += f_q·(G F̂)_q
-            solver.step_forces(x, v)
+        if self._weight_hat is not None:  # the pressures' spread a_q f_q: â_q += f_q·(G F̂)_q (`_mass_share` left f)
             eval_point_weight_share(solver.ground_forces, pts["a"], self._area, self._weight_hat)
         eval_ground_adjoint(ground, pts["p"], pts["u"], pts["a"], pts["p_hat"], pts["u_hat"], self._ground_gradient)
         self._spread(solver, pts["p_hat"], s["x_hat"])

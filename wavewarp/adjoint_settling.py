@@ -15,6 +15,18 @@ from .geometry import limit_positions, limit_surface
 from .kernels.adjoint import eval_count, eval_pull, eval_push
 
 
+def placement_depths(mesh, per_area: bool) -> tuple:
+    """(z, a, pen) of the placed `mesh`'s ground points as `ground_lift` weighs them: the limit points (a = 1), or with
+    the area contact (`per_area`) the limit surface's quadrature points (a = dω̄⁰); pen = max(-z, 0)."""
+    if per_area:
+        surface = limit_surface(mesh, device="cpu", dtype="float64")
+        z, weights = surface.points[:, 2], surface.area
+    else:
+        z = limit_positions(mesh, device="cpu", dtype="float64")[:, 2]
+        weights = np.ones_like(z)
+    return z, weights, np.maximum(-z, 0.0)
+
+
 class SettlingAdjoint:
     """The settling's replay and adjoint; the host class provides the run, the shell, the walk's solver, the scratch
     arrays and stored rows, `_run`, `_ensure_rows`, `_contact_of` and `_step_adjoint`."""
@@ -110,12 +122,7 @@ class SettlingAdjoint:
         """The stiffness gradient's share of the placement: the walker starts lowered by the depth d at which k Σ w pen²
         bears its weight (`ground_lift`), ∂z/∂k = Σ w pen² / (2k Σ w pen), pen the ground's points' depths below z = 0
         (limit points, w = 1; or quadrature points, w = dω̄⁰)."""
-        if self._area is None:
-            z, weights = limit_positions(self.run.mesh, device="cpu", dtype="float64")[:, 2], 1.0
-        else:
-            surface = limit_surface(self.run.mesh, device="cpu", dtype="float64")
-            z, weights = surface.points[:, 2], surface.area
-        depths = np.maximum(-z, 0.0)
+        _, weights, depths = placement_depths(self.run.mesh, self._area is not None)
         k = self.solver.ground.stiffness
         held = np.sum(weights * depths)
         lowering = np.sum(weights * depths**2) / (2.0 * k * held) if held > 0 else 0.0

@@ -23,7 +23,8 @@ import scipy.sparse as sparse
 import warp as wp
 
 from .device import mat22
-from .geometry import SurfaceTables, evaluate, limit_positions, limit_surface
+from .adjoint_settling import placement_depths
+from .geometry import SurfaceTables, evaluate, limit_positions
 from .kernels.contact import spread_to_control_points
 from .kernels.adjoint_rest import eval_rest_forms_adjoint
 from .kernels.adjoint_shape import eval_inverse_mass_share, eval_rigid_motion_mass_share
@@ -62,11 +63,13 @@ class RestShapeAdjoint:
     def _mass_share(self, solver, x, v, dt: float) -> None:
         """M̂ += a step's share (module docstring): F/M through the velocity's adjoint ŵ (the predictor's, v̂*, with
         the implicit contact), and the inertial damping's rigid-body motion (the damping's sums as its adjoint left
-        them). The implicit contact's own share is taken in its backward pass."""
+        them). The implicit contact's own share is taken in its backward pass; an explicit step's ground forces are left
+        evaluated at x, v for the ground's adjoint (its weights' share)."""
         s, overdamped = self._scratch, solver is self.solver
         w_hat = s["v_star_hat"] if solver.implicit else s["w_hat"]
         scale = 1.0 / solver.drag if overdamped else dt
-        eval_inverse_mass_share(w_hat, solver.step_forces(x, v), solver.inverse_mass, scale, self._mass_hat)
+        forces = solver.force_buffer if solver.implicit else solver.step_forces(x, v)  # the predictor left F
+        eval_inverse_mass_share(w_hat, forces, solver.inverse_mass, scale, self._mass_hat)
         if not overdamped and solver.damping > 0:
             eval_rigid_motion_mass_share(x, v, solver.rigid_motion(x, v), self._damping_sums, solver.total_mass,
                                          dt * solver.damping, self._mass_hat)  # fmt: skip
@@ -132,19 +135,14 @@ class RestShapeAdjoint:
         (module docstring; with the area contact Σ a pen stands for Σ pen, and Σ pen² da / (2 Σ a pen) is added)."""
         mesh, ground = self.run.mesh, self.solver.ground
         lowering_hat = float(np.sum(self._scratch["x_hat"].numpy()[:, 2]))
-        limit_z = limit_positions(mesh, device="cpu", dtype="float64")[:, 2]
-        if ground.contact == "point":
-            z, weights = limit_z, np.ones(mesh.n_vertices)
-        else:
-            surface = limit_surface(mesh, rule=AREA_RULE, device="cpu", dtype="float64")
-            z, weights = surface.points[:, 2], surface.area
-        depths = np.maximum(-z, 0.0)
+        z, weights, depths = placement_depths(mesh, ground.contact == "area")
         held = float(np.sum(weights * depths))
         rows, cols, vals = mesh.limit_mask_matrix()
         limit = sparse.csr_matrix((vals, (rows, cols)), shape=(mesh.n_vertices, mesh.n_vertices))
         heights_hat = np.zeros((mesh.n_vertices, 3))
         if held == 0:  # no depth: the lowest limit point touches the ground
-            heights_hat[:, 2] = -lowering_hat * limit[int(np.argmin(limit_z))].toarray().ravel()
+            lowest = int(np.argmin(limit_positions(mesh, device="cpu", dtype="float64")[:, 2]))
+            heights_hat[:, 2] = -lowering_hat * limit[lowest].toarray().ravel()
             out.assign(out.numpy() + heights_hat)
             return 0.0
         if ground.contact == "point":

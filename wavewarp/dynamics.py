@@ -273,6 +273,7 @@ class InertialSolver:
                 self.contact_forces(x, v)
         return self._forces
 
+    force_buffer = property(lambda self: self._forces)  # the forces as last evaluated (`step`, `predictor`, `step_forces`)
     ground_forces = property(lambda self: self._limit_forces)  # the ground's forces at its points, as last evaluated
 
     def rigid_motion(self, x: wp.array, v: wp.array) -> wp.array:
