@@ -13,7 +13,7 @@ import warp as wp
 from wavewarp.adjoint import WalkAdjoint, check_adjoint_walk, checkpoint_spacing, walker_adjoint_gradient
 from wavewarp.benchmarks.adjoint_cost import main as adjoint_cost
 from wavewarp.benchmarks.adjoint_horizon import main as adjoint_horizon
-from wavewarp.benchmarks.inverse_design import main as inverse_design
+from wavewarp.benchmarks.inverse_design import log_step, main as inverse_design
 from wavewarp.benchmarks.tape_adjoints import LAWS, LawCase
 from wavewarp.cli import main
 from wavewarp.initial import gaussian_pulse
@@ -432,10 +432,18 @@ def test_one_adjoint_taken_twice_gives_the_same_gradient_through_its_captured_gr
 
 def test_inverse_design_by_the_reverse_mode_raises_the_walk_and_a_plain_run_confirms_it(tmp_path):
     sets = [arg for item in [*PAPER_WALK, "periods=0.3"] for arg in ("--set", item)]
-    assert inverse_design(["--scene", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "friction", "--iterations",
-                           "3", "--device", "cpu", "--out", str(tmp_path), *sets]) == 0  # fmt: skip
+    design = ["--scene", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "friction", "--device", "cpu", "--out",
+              str(tmp_path), *sets]  # fmt: skip
+    assert inverse_design([*design, "--iterations", "2"]) == 0
+    first = json.loads((tmp_path / "inverse_design.json").read_text())["history"]
+    assert inverse_design([*design, "--iterations", "3", "--resume"]) == 0  # a third step, gone on from the file
     result = json.loads((tmp_path / "inverse_design.json").read_text())
+    assert result["history"][:2] == first and [row["iteration"] for row in result["history"]] == [0, 1, 2]
+    best = max((row for row in first if row["accepted"]), key=lambda row: row["J"])
+    assert result["history"][2]["theta"] == log_step(best["theta"], best["gradient"], first[-1]["rate"])
     assert result["method"] == "adjoint" and result["best"]["J"] > result["history"][0]["J"]
+    with pytest.raises(SystemExit, match="wrt"):  # other settings: not gone on from
+        inverse_design([*design, "--wrt", "AC", "--iterations", "4", "--resume"])
     assert result["verified_J"] == pytest.approx(result["best"]["J"], rel=1e-12)  # the same plain run
     body = ["--set", "slope=5", "--set", "contact_solve=implicit", "--set", "sharpness=inf", "--set",
             "drag_frame=body"]  # the rest shape's reverse mode refuses the body frame on a slope, before any run

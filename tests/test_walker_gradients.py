@@ -9,10 +9,11 @@ import pytest
 
 from wavewarp.batch import displaced
 from wavewarp.benchmarks.gradient_horizon import growth_per_period, horizon, running_magnitude
-from wavewarp.benchmarks.inverse_design import ascend, log_step
+from wavewarp.benchmarks.inverse_design import ascend, log_step, smoothed_shape_gradient
 from wavewarp.cli import main
 from wavewarp.driver import simulate
-from wavewarp.gradients import GradientError
+from wavewarp.laplace import LaplaceBeltrami
+from wavewarp.gradients import GradientError, control_scale
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.walker import WalkerRun, place_walker, sphere_walker_recipe
 from wavewarp.walker_gradients import (WalkerGradientError, check_walker_differentiable, check_walker_values,
@@ -141,6 +142,49 @@ def test_the_design_ascent_reaches_the_maximum_of_a_known_objective():
     # a coordinate (any sign) steps additively by rate × L at most: s = (2 × 1, 10 × -0.4) -> Δx = 0.5 × 10 × (-4/4)
     assert log_step({"a": 2.0, "x": -1.0}, {"a": 1.0, "x": -0.4}, 0.5, {"x": 10.0}) == pytest.approx(
         {"a": 2.0 * np.exp(0.25), "x": -6.0})
+    # cut after 7 evaluations (an undone step among them) and gone on from its rows (as read back from JSON):
+    # the same steps as the uninterrupted ascent
+    cut = json.loads(json.dumps(history[:7], default=float))
+    assert not all(row["accepted"] for row in cut)
+    resumed = ascend(objective_and_gradient, {"a": 1.0, "b": 1.0}, iterations=60, rate=0.3, report=lambda m: None,
+                     history=cut)  # fmt: skip
+    assert [(row["theta"], row["J"], row["rate"], row["accepted"]) for row in resumed] == [
+        (row["theta"], row["J"], row["rate"], row["accepted"]) for row in history]
+
+
+def test_the_rest_shapes_design_direction_is_the_steepest_ascent_in_the_smooth_metric():
+    """d = (M + ℓ²K)⁻¹ g × (area / points) on the quick prism's control points (its rest limit surface): for every
+    direction v, g·v / ‖v‖ ≤ g·d / ‖d‖ in the norm ‖v‖² = vᵀ(M + ℓ²K)v of the displacement field (Cauchy–Schwarz,
+    checked on random v); a uniform density of J, g = M f (f constant), gives d = f × area / points; a subset of the
+    points gets the steepest ascent within their own displacements."""
+    module = load_scene("prism-walker")
+    mesh = module.recipe(resolve(module.Parameters, module.QUICK, ["dtype=float64"]), device="cpu",
+                         report=lambda m: None)[0]  # fmt: skip
+    operator = LaplaceBeltrami(mesh, device="cpu", dtype="float64")
+    mass, stiffness = operator.mass_matrix().toarray(), operator.stiffness_matrix().toarray()
+    n, length = mesh.n_vertices, 0.3 * control_scale(mesh.vertices)
+    carried = mass.sum() / n
+    f = np.array([0.2, -1.0, 0.5])
+    uniform = smoothed_shape_gradient(mesh, list(range(n)), mass @ np.tile(f, (n, 1)), length)
+    assert uniform == pytest.approx(np.tile(f * carried, (n, 1)), rel=1e-10, abs=1e-12)
+    rng = np.random.default_rng(4)
+    for points in (list(range(n)), [5, 6, 30, 41]):
+        metric = (mass + length**2 * stiffness)[np.ix_(points, points)]
+        g = rng.normal(size=(len(points), 3))
+        d = smoothed_shape_gradient(mesh, points, g, length)
+
+        def gain(v):  # dJ per unit norm, the axes together
+            return np.sum(g * v) / np.sqrt(np.sum(v * (metric @ v)))
+
+        assert np.sum(g * d) > 0 and gain(d) >= max(gain(rng.normal(size=g.shape)) for _ in range(200))
+        assert gain(d) == pytest.approx(np.sqrt(np.sum(g * np.linalg.solve(metric, g))), rel=1e-10)
+        assert gain(g) < gain(d)  # the raw gradient is not the steepest direction of a smooth displacement
+
+
+def test_a_design_without_a_smoothing_length_is_refused_with_the_fix(capsys):
+    with pytest.raises(SystemExit):
+        main(["bench", "inverse_design", "--device", "cpu", "--quick", "--points", "all", "--smoothing", "0"])
+    assert "give a length > 0" in capsys.readouterr().err
 
 
 def test_the_elongation_stretches_the_rest_shape_along_the_wave_and_keeps_the_origin_vertex():
