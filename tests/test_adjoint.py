@@ -239,7 +239,8 @@ def coulomb_half_period():
 
 @pytest.mark.parametrize("walker, name, relative", [("half_period", "stiffness", 1e-3), ("half_period", "thickness", 1e-3),
                                                    ("coulomb_half_period", "friction", 1e-4),
-                                                   ("coulomb_half_period", "drag", 1e-4)])  # fmt: skip
+                                                   pytest.param("coulomb_half_period", "drag", 1e-4,
+                                                                marks=pytest.mark.slow)])  # fmt: skip
 def test_the_adjoint_through_the_settling_matches_central_differences_of_whole_runs(walker, name, relative, request):
     """On the explicit contact and the implicit one with Coulomb's law, whose stick and slip make J piecewise smooth:
     a step of 1e-3 θ crosses their switches, 1e-4 does not."""
@@ -249,7 +250,8 @@ def test_the_adjoint_through_the_settling_matches_central_differences_of_whole_r
     assert adjoint == pytest.approx(whole_run_difference(run.p, run, name, relative), rel=1e-5)
 
 
-@pytest.mark.parametrize("contact", [[], COULOMB], ids=["explicit", "implicit"])
+@pytest.mark.parametrize("contact", [pytest.param([], id="explicit"),
+                                     pytest.param(COULOMB, id="implicit", marks=pytest.mark.slow)])  # fmt: skip
 def test_the_adjoint_on_the_area_contact_matches_central_differences_of_whole_runs(contact):
     """The contact as a pressure on the limit surface's quadrature points: k and β per unit area (per the scene's
     contact_area), the points' areas in the spread and its transpose."""
@@ -262,7 +264,8 @@ def test_the_adjoint_on_the_area_contact_matches_central_differences_of_whole_ru
 
 @pytest.mark.parametrize("law, names, relative", [
     pytest.param(["sharpness=10"], ["sharpness", "drag"], 1e-4, id="tanh", marks=pytest.mark.slow),
-    pytest.param([], ["friction", "drag"], 1e-5, id="coulomb")])  # fmt: skip
+    pytest.param([], ["friction"], 1e-5, id="coulomb-friction", marks=pytest.mark.slow),
+    pytest.param([], ["drag"], 1e-5, id="coulomb-drag")])  # fmt: skip
 def test_the_adjoint_in_the_body_frame_matches_central_differences_of_whole_runs(law, names, relative):
     """The drag on the velocity relative to the body velocity U, which Weiszfeld steps set in every contact pass so that
     the net friction vanishes: U's steps taken back. The area contact, whose many points in contact share the friction
@@ -284,6 +287,7 @@ def test_the_adjoint_on_the_bilayer_walker_matches_central_differences_of_whole_
         assert adjoint["gradient"][name] == pytest.approx(difference, rel=1e-5), name
 
 
+@pytest.mark.slow
 def test_the_implicit_contacts_checkpointed_gradient_equals_the_fully_stored_one_bitwise(coulomb_half_period):
     run, start, steps = coulomb_half_period
     results = []
