@@ -70,8 +70,8 @@ def smoothed_shape_gradient(mesh: Mesh, points: list, gradient: np.ndarray, leng
     the gradient in the H¹ metric of the displacement u = Σ N_I ΔX_I (I in `points`) on the limit surface,
     ∫ u·u + ℓ² ∇u:∇u dω̄ = ΔXᵀ B ΔX, B = M + ℓ²K (the subdivision basis' consistent mass and stiffness):
     d = B⁻¹ g per axis (B's rows and columns of `points`), times the area a control point carries on average.
-    dJ = g·d > 0 for any g; g of a uniform J density on every point, g = M f (f constant), is kept as it is
-    (K f = 0); unlike g, d does not grow finer with the mesh: one point's spike of g spreads over ℓ instead of
+    dJ = g·d > 0 for any g; g of a uniform J density on every point, g = M f (f constant), gives d = f × the mean
+    area (K f = 0), g itself where the points carry equal areas; unlike g, d does not grow finer with the mesh: one point's spike of g spreads over ℓ instead of
     moving that point alone."""
     operator = LaplaceBeltrami(mesh, device="cpu", dtype="float64")
     mass = operator.mass_matrix()
