@@ -15,7 +15,7 @@ The steps are taken in log θ (every parameter stays positive) within a trust re
 sensitive parameter moves by `--rate` of itself; `--points` adds the rest shape's control points, which
 step along the shape's ascent direction d, dJ/dX smoothed over a length ℓ (`--smoothing`, in the control
 points' RMS radius L, and no shorter than the control mesh's mean edge, which no displacement of its points
-varies over less; `smoothed_shape_gradient`), by `--rate` × ℓ at most (scaled by ℓ d): a displacement that
+varies over less; `shape_smoother`), by `--rate` × ℓ at most (scaled by ℓ d): a displacement that
 varies over ℓ and stretches the rest mesh's edges by about `--rate` at most. (Unsmoothed, one control point of
 a fine mesh would move alone by as much, the mesh would fold and the mechanics' stable step collapse.) A step
 that does not raise J (read from the next batch's unperturbed world) is undone and the rate halved. Writes
@@ -37,7 +37,7 @@ from dataclasses import replace
 from datetime import date
 
 import numpy as np
-from scipy.sparse.linalg import spsolve
+from scipy.sparse.linalg import factorized
 
 if __package__ in (None, ""):
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -65,18 +65,19 @@ def log_step(theta: dict, gradient: dict, rate: float, lengths=None) -> dict:
             else theta[name] * float(np.exp(rate * scaled[name] / largest)) for name in theta}  # fmt: skip
 
 
-def smoothed_shape_gradient(mesh: Mesh, points: list, gradient: np.ndarray, length: float) -> np.ndarray:
-    """The rest shape's ascent direction d (len(points), 3) for dJ/dX `gradient` of the control `points` of `mesh`:
-    the gradient in the H¹ metric of the displacement u = Σ N_I ΔX_I (I in `points`) on the limit surface,
-    ∫ u·u + ℓ² ∇u:∇u dω̄ = ΔXᵀ B ΔX, B = M + ℓ²K (the subdivision basis' consistent mass and stiffness):
-    d = B⁻¹ g per axis (B's rows and columns of `points`), times the area a control point carries on average.
-    dJ = g·d > 0 for any g; g of a uniform J density on every point, g = M f (f constant), gives d = f × the mean
-    area (K f = 0), g itself where the points carry equal areas; unlike g, d does not grow finer with the mesh: one point's spike of g spreads over ℓ instead of
-    moving that point alone."""
+def shape_smoother(mesh: Mesh, points: list, length: float):
+    """g -> d: the rest shape's ascent direction d (len(points), 3) for dJ/dX g of the control `points` of `mesh`, the
+    gradient in the H¹ metric of the displacement u = Σ N_I ΔX_I (I in `points`) on the limit surface,
+    ∫ u·u + ℓ² ∇u:∇u dω̄ = ΔXᵀ B ΔX, B = M + ℓ²K (the subdivision basis' consistent mass and stiffness): d = B⁻¹ g
+    per axis (B's rows and columns of `points`, factorised once), times the area a control point carries on average.
+    dJ = g·d > 0 for any g; g of a uniform J density on every point, g = M f (f constant), gives d = f × the mean area
+    (K f = 0), g itself where the points carry equal areas; unlike g, d does not grow finer with the mesh: one point's
+    spike of g spreads over ℓ instead of moving that point alone."""
     operator = LaplaceBeltrami(mesh, device="cpu", dtype="float64")
     mass = operator.mass_matrix()
-    metric = (mass + length**2 * operator.stiffness_matrix()).tocsr()[points][:, points]
-    return spsolve(metric.tocsc(), gradient).reshape(gradient.shape) * (mass.sum() / mesh.n_vertices)
+    solve = factorized((mass + length**2 * operator.stiffness_matrix()).tocsr()[points][:, points].tocsc())
+    carried = mass.sum() / mesh.n_vertices
+    return lambda gradient: np.column_stack([solve(gradient[:, axis]) for axis in range(3)]) * carried
 
 
 def ascend(objective_and_gradient, theta: dict, *, iterations: int, rate: float, lengths=None, report=print,
@@ -237,13 +238,15 @@ def main(argv=None) -> int:
     smoothing = max(args.smoothing * header["length"], mean_edge(mesh))  # ℓ
     lengths = {name: smoothing for name in coordinates}
 
-    def direction(gradient):  # the shape's coordinates smoothed over ℓ on the scene's rest shape
-        if not coordinates:
+    smooth = shape_smoother(mesh, points, smoothing) if points else None  # on the scene's rest shape
+
+    def direction(gradient):  # the shape's coordinates smoothed over ℓ
+        if smooth is None:
             return gradient
         by_point = np.zeros((len(points), 3))
         for name, (row, a) in coordinates.items():
             by_point[row, a] = gradient[name]
-        smoothed = smoothed_shape_gradient(mesh, points, by_point, smoothing)
+        smoothed = smooth(by_point)
         return {**gradient, **{name: float(smoothed[row, a]) for name, (row, a) in coordinates.items()}}
 
     history = ascend(objective_and_gradient, theta, iterations=args.iterations, rate=args.rate, lengths=lengths,
