@@ -27,7 +27,8 @@ import warp as wp  # noqa: E402
 from wavewarp.device import describe_device, device_tag, resolve_device  # noqa: E402
 from wavewarp.io import write_json  # noqa: E402
 from wavewarp.kernels.adjoint_contact import ground_adjoint_kernel, implicit_law_adjoint_kernel  # noqa: E402
-from wavewarp.kernels.contact import friction_kernel, ground_contact_kernel, implicit_contact_kernel  # noqa: E402
+from wavewarp.kernels.contact import friction_kernel, ground_contact_kernel  # noqa: E402
+from wavewarp.kernels.implicit_contact import implicit_contact_kernel  # noqa: E402
 
 LAWS = ("explicit", "implicit-coulomb", "implicit-tanh")
 K, BETA, MU, K_F, SCALE, DT = 1e3, 5.0, 0.5, 10.0, 0.1, 1e-3  # the laws' parameters (k_f = ∞ for Coulomb's)

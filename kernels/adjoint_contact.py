@@ -1,14 +1,14 @@
 """Adjoint kernels of the walkers' ground laws (docs/theory/gradients.md, "Reverse mode"), each with its launcher: the
 explicit law at the limit points, the implicit law at a point, and the body frame's Weiszfeld steps for the horizontal
-body velocity U (kernels/contact.py). One float64 world; the parameter gradients are summed atomically."""
+body velocity U (kernels/contact.py, kernels/implicit_contact.py). One float64 world; the parameter gradients are summed atomically."""
 
 from typing import Any
 
 import warp as wp
 
 from . import declare_overloads, scalar_of
-from .contact import friction_magnitude, friction_slope_at_rest, implicit_normal_force
-from .contact import slip_speed as slip_root
+from .implicit_contact import friction_magnitude, friction_slope_at_rest, implicit_normal_force
+from .implicit_contact import slip_speed as slip_root
 from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
 
 LawGradient = wp.types.vector(length=5, dtype=wp.float64)  # ∂/∂(k, β, μ, k_f, r) of one point's law
@@ -62,7 +62,7 @@ def ground_adjoint_kernel(
 @wp.func
 def law_adjoint(z: wp.float64, u: wp.vec3d, r: wp.float64, dt: wp.float64, k: wp.float64, beta: wp.float64,
                 mu: wp.float64, k_f: wp.float64, a: wp.vec3d, h_seed: wp.float64):  # fmt: skip
-    """Adjoint of the implicit ground law at a point (kernels/contact.py `implicit_contact_kernel`) with slip velocity u
+    """Adjoint of the implicit ground law at a point (kernels/implicit_contact.py `implicit_contact_kernel`) with slip velocity u
     (the point's velocity without friction, plus U in the body frame) and response r: F_n = max((kz² - β'u_z)/(1 +
     β'r), 0), β' = β - 2kz dt, friction -|f_t| u_t/|u_t| with |f_t| = min(μF_n, |u_t|/r) (Coulomb, k_f = ∞) or
     μF_n tanh(k_f s), s + rμF_n tanh(k_f s) = |u_t| (differentiated implicitly). Given f̂ = a and the adjoint h_seed of |f_t|/|u_t| (the
@@ -165,7 +165,7 @@ def horizontal_sum_kernel(values: wp.array(dtype=wp.vec3d), total: wp.array(dtyp
 def body_step_seeds_kernel(force_sum: wp.array(dtype=wp.vec3d), stiffness_sum: wp.array(dtype=wp.float64),
                            external: wp.array(dtype=wp.vec3d), body_hat: wp.array(dtype=wp.vec3d),
                            force_hat: wp.array(dtype=wp.vec3d), stiffness_hat: wp.array(dtype=wp.float64)):  # fmt: skip
-    """A Weiszfeld step U' = U + G/h (kernels/contact.py `body_velocity_kernel`, G = Σ a f_t + external) backwards from
+    """A Weiszfeld step U' = U + G/h (kernels/implicit_contact.py `body_velocity_kernel`, G = Σ a f_t + external) backwards from
     Û': Ĝ = Û'/h, ĥ = -Û'·G/h² (none where h = 0: the step left U as it was)."""
     h = stiffness_sum[0]
     force_hat[0] = wp.vec3d()

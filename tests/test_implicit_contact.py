@@ -7,10 +7,20 @@ import math
 
 import numpy as np
 import pytest
+import warp as wp
 from scipy.optimize import brentq
 
 from wavewarp.dynamics import Ground, OverdampedDynamics, ShellDynamics
 from wavewarp.geometry import limit_positions
+from wavewarp.kernels.contact import ground_motion, limit_transpose_kernel
+from wavewarp.kernels.implicit_contact import (
+    contact_indicator_kernel,
+    contact_velocity_kernel,
+    eval_implicit_ground,
+    implicit_contact_kernel,
+    limit_coupled_velocity_kernel,
+    limit_response_kernel,
+)
 from wavewarp.mesh import Mesh, cube
 from wavewarp.shell import Shell
 
@@ -18,12 +28,12 @@ G, MU = 10.0, 0.5
 
 
 def block_on_slope(tan_theta, *, sharpness=math.inf, solve="implicit", contact="point", young=1e6, drag=None,
-                   sweeps=8, settle=2.0, drag_frame="lab", x0=None):  # fmt: skip
+                   sweeps=8, settle=2.0, drag_frame="lab", x0=None, dtype="float64", device="cpu"):  # fmt: skip
     """A 1 × 1 × 0.4 box (wide: it neither tips nor rocks) put down on a slope tan θ (or started at `x0`), run
     for `settle`."""
     box = cube(1.0, 4)
     mesh = Mesh(box.vertices * [1.0, 1.0, 0.4], box.triangles)
-    shell = Shell(mesh, thickness=0.1, young=young, device="cpu", dtype="float64")
+    shell = Shell(mesh, thickness=0.1, young=young, device=device, dtype=dtype)
     stiffness, damping = (1e4, 20.0) if contact == "point" else (1e4 * 25 / 2.8, 20.0 * 25 / 2.8)
     ground = Ground(stiffness=stiffness, damping=damping, friction=MU, sharpness=sharpness, solve=solve,
                     contact=contact, sweeps=sweeps, slope=math.atan(tan_theta))  # fmt: skip
@@ -179,3 +189,59 @@ def test_implicit_ground_leaves_the_stability_bound_to_the_shell_and_its_damping
     assert implicit.stable_dt == pytest.approx(free.stable_dt, rel=1e-12)
     assert explicit.stable_dt < 0.5 * implicit.stable_dt
     assert np.isfinite(implicit.stable_dt)
+
+
+def separate_launches(solver, x, v, scale, dt):
+    """The implicit contact step on the limit points (lab frame) launch by launch: the contact set's indicator, Lᵀ of
+    it into a zeroed buffer and the responses, the law alone; per sweep Lᵀ f, the coupled velocity and the law; then
+    Lᵀ f and the velocity update. x, v updated; returns the points' forces."""
+    n, s, ground = len(x), type(scale), solver.ground
+    ring = [solver.mask.ring_start, solver.mask.ring, solver.mask.centre_weight, solver.mask.ring_weight]
+    vec = x.dtype
+    p, u, f, others, load = (wp.zeros(n, dtype=vec) for _ in range(5))
+    response, normal = wp.zeros(n, dtype=s), wp.zeros(n, dtype=s)
+    laws = [scale, s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
+    body = wp.zeros(1, dtype=vec)
+    ground_motion(ground, x, v, solver.mask, None, p, u)
+    wp.launch(contact_indicator_kernel, n, inputs=[p], outputs=[f])
+    wp.launch(limit_transpose_kernel, n, inputs=[f, *ring], outputs=[load])
+    wp.launch(limit_response_kernel, n, inputs=[load, solver.inverse_mass, *ring], outputs=[response])
+    wp.launch(implicit_contact_kernel, n, inputs=[p, u, response, *laws, body], outputs=[normal, f])
+    for _ in range(ground.sweeps):
+        load.zero_()
+        wp.launch(limit_transpose_kernel, n, inputs=[f, *ring], outputs=[load])
+        wp.launch(limit_coupled_velocity_kernel, n, inputs=[load, solver.inverse_mass, scale, *ring, u, response, f],
+                  outputs=[others])  # fmt: skip
+        wp.launch(implicit_contact_kernel, n, inputs=[p, others, response, *laws, body], outputs=[normal, f])
+    load.zero_()
+    wp.launch(limit_transpose_kernel, n, inputs=[f, *ring], outputs=[load])
+    wp.launch(contact_velocity_kernel, n, inputs=[load, solver.inverse_mass, scale, s(dt)], outputs=[x, v])
+    return f
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@pytest.mark.parametrize("sweeps", [0, 1, 2])
+def test_one_launch_per_pass_equals_the_separate_launches_bit_for_bit(dtype, sweeps, device="cpu"):
+    """On the limit points in the lab frame (the scenes' default) each pass of the implicit contact is one launch
+    (kernels/implicit_contact.py `eval_limit_sweeps`: the transposes formed in place, points off the ground
+    skipped); a block sliding down a slope (contact, Coulomb friction, points off the ground), one step from its
+    predictor: the same forces, velocities and positions as the separate launches, bit for bit (`device`: where a
+    GPU is, the same check there)."""
+    run = block_on_slope(0.7, sweeps=sweeps, settle=0.05, dtype=dtype, device=device)
+    solver, dt = run.solver, run.dt
+    scale = solver.scalar(dt)
+    x, v = wp.clone(run.state.x), wp.empty_like(run.state.v)
+    solver.predictor(x, run.state.v, dt, v)
+    x_ref, v_ref = wp.clone(x), wp.clone(v)
+    n = len(x)
+    with wp.ScopedDevice(device):
+        expected = separate_launches(solver, x_ref, v_ref, scale, dt)
+        points, velocities, others, forces, load = (wp.zeros(n, dtype=x.dtype) for _ in range(5))
+        response, normal = wp.zeros(n, dtype=solver.scalar), wp.zeros(n, dtype=solver.scalar)
+        eval_implicit_ground(solver.ground, x, v, solver.inverse_mass, dt, dt, solver.mask, None, None, points,
+                             velocities, response, others, normal, forces, load, solver.body)  # fmt: skip
+    sliding = np.linalg.norm(forces.numpy()[:, :2], axis=1)
+    assert (sliding > 0).sum() >= 4 and (normal.numpy() == 0).sum() > n // 2  # friction acts; most points are off
+    np.testing.assert_array_equal(forces.numpy(), expected.numpy())
+    np.testing.assert_array_equal(v.numpy(), v_ref.numpy())
+    np.testing.assert_array_equal(x.numpy(), x_ref.numpy())

@@ -68,7 +68,7 @@ SHAPE_PARAMETERS = ("elongation",)  # through the rest shape's gradient (wavewar
 ADJOINT_PARAMETERS = SHELL_PARAMETERS + GROUND_PARAMETERS + ("drag",) + SHAPE_PARAMETERS
 SETTLE_FREE = ("AC", "AI")  # the walk's start (settled at c = 0) does not depend on them
 ACTION_STEP = 1e-4  # the Hessian action's central difference, in mean edges along the direction's largest component (1e-5: round-off)
-MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
+MODULES = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.implicit_contact, kernels.dynamics, kernels.limit_surface,
            kernels.reduce, kernels.adjoint, kernels.adjoint_contact, kernels.adjoint_wave)  # what a walk and its adjoint launch
 
 

@@ -1,5 +1,5 @@
 """The implicit contact's adjoint (docs/theory/gradients.md, "Reverse mode"): the per-point solve and its Jacobi
-sweeps (kernels/contact.py `eval_implicit_ground`), on the limit points (point contact) or the limit surface's
+sweeps (kernels/implicit_contact.py `eval_implicit_ground`), on the limit points (point contact) or the limit surface's
 quadrature points (area contact), with the drag in the lab frame or the body frame, run again at a substep and then
 taken backwards.
 
@@ -42,18 +42,19 @@ from .kernels.adjoint_shape import (
     eval_point_weight_share,
     eval_response_share,
 )
-from .kernels.contact import (
+from .kernels.contact import ground_motion, spread_to_control_points
+from .kernels.implicit_contact import (
     add_body_velocity_kernel,
     body_friction_sums_kernel,
     contact_indicator_kernel,
-    ground_motion,
     implicit_contact_kernel,
+    limit_contact_sweep_kernel,
     limit_coupled_velocity_kernel,
+    limit_first_contact_kernel,
     limit_response_kernel,
     quadrature_coupled_velocity_kernel,
     quadrature_response_kernel,
     solve_body_velocity,
-    spread_to_control_points,
 )
 from .kernels.reduce import REDUCTION_BLOCK
 
@@ -85,7 +86,7 @@ class ImplicitContactAdjoint:
             self.response_hat, self.indicator = wp.zeros(n, dtype=wp.float64), wp.zeros(n, dtype=wp.vec3d)
             self.no_weights = wp.zeros(0, dtype=wp.float64)
             self.spread = wp.zeros(vertices, dtype=wp.vec3d)  # S f of a pass (the masses' share)
-        self.frame = solver.body  # kernels/contact.py BodyFrame
+        self.frame = solver.body  # kernels/implicit_contact.py BodyFrame
         if self.frame.solve:
             first, later = self.frame.iterations
             with wp.ScopedDevice(solver.device):  # each pass's body velocities U_0 … U_K, its sums and seeds
@@ -112,6 +113,9 @@ class ImplicitContactAdjoint:
         """The contact solve at positions x from the predictor v_star, every sweep's forces and velocities kept."""
         device, n = x.device, len(self.p)
         ground_motion(self.ground, x, v_star, self.mask, self.patch, self.p, self.u_star)
+        if self.point and not self.frame.solve:
+            self._forward_fused(scale, dt)
+            return
         wp.launch(contact_indicator_kernel, dim=n, inputs=[self.p], outputs=[self.forces[0]], device=device)
         self.load.zero_()
         spread_to_control_points(self.ground, self.forces[0], self.mask, self.patch, None if self.point else self.area,
@@ -129,6 +133,20 @@ class ImplicitContactAdjoint:
             wp.launch(implicit_contact_kernel, dim=n, inputs=[self.p, velocities, self.response, *laws, body],
                       outputs=[self.normal, self.forces[s]], device=device)  # fmt: skip
 
+    def _forward_fused(self, scale: float, dt: float) -> None:
+        """`forward` on the limit points in the lab frame: the solver's one launch per pass
+        (kernels/implicit_contact.py `eval_limit_sweeps`), each pass into its own buffers."""
+        device, n, laws = self.p.device, len(self.p), implicit_laws(self.ground, scale, dt)
+        wp.launch(contact_indicator_kernel, dim=n, inputs=[self.p], outputs=[self.indicator], device=device)
+        wp.launch(limit_first_contact_kernel, dim=n,
+                  inputs=[self.p, self.u_star, self.indicator, self.solver.inverse_mass, *self.tables, *laws, self.body],
+                  outputs=[self.response, self.normal, self.forces[0]], device=device)  # fmt: skip
+        for s in range(1, len(self.forces)):
+            wp.launch(limit_contact_sweep_kernel, dim=n,
+                      inputs=[self.p, self.u_star, self.forces[s - 1], self.solver.inverse_mass, *self.tables,
+                              self.response, *laws, self.body],
+                      outputs=[self.others[s], self.normal, self.forces[s]], device=device)  # fmt: skip
+
     def _sums(self, velocities, body, laws) -> None:
         """self.sums = the net friction Σ a f_t and the stiffness Σ a |f_t|/|y| at body velocity `body` (the sums of a
         Weiszfeld step, without the step)."""
@@ -140,7 +158,7 @@ class ImplicitContactAdjoint:
                   outputs=self.sums, block_dim=REDUCTION_BLOCK, device=self.p.device)  # fmt: skip
 
     def _solve_body(self, s: int, velocities, laws):
-        """Pass s's Weiszfeld steps of U (kernels/contact.py `solve_body_velocity`), every iterate kept; the last."""
+        """Pass s's Weiszfeld steps of U (kernels/implicit_contact.py `solve_body_velocity`), every iterate kept; the last."""
         iterates = self.iterates[s]
         if s == 0:
             iterates[0].zero_()

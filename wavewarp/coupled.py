@@ -272,7 +272,7 @@ class Walking:
         self.ramp = bool(ramp) and self.substeps > 1  # one substep: the ramp's only value is c¹
         self.shell.update_reference(wave.c)
         self._c_start, self._c_ramp = wp.empty_like(wave.c), wp.empty_like(wave.c)
-        modules = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.dynamics, kernels.limit_surface,
+        modules = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.implicit_contact, kernels.dynamics, kernels.limit_surface,
                    kernels.reduce)  # fmt: skip
         self.runner = GuardedRunner(self._step, protected=self._protected, check=self._check,
                                     reset=wave.solver.reset_checks, restore=self._restore, device=self.shell.device,

@@ -39,10 +39,11 @@ from .device import reduction_threads
 from .geometry import LimitMask, checked_positions, evaluate
 from .kernels import contact as kernels_contact
 from .kernels import dynamics as kernels_dynamics
+from .kernels import implicit_contact as kernels_implicit_contact
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import reduce as kernels_reduce
 from .kernels import shell as kernels_shell
-from .kernels.contact import BodyFrame, eval_ground, eval_implicit_ground
+from .kernels.contact import eval_ground
 from .kernels.dynamics import (
     eval_rigid_correction,
     eval_speed_runaway,
@@ -50,6 +51,7 @@ from .kernels.dynamics import (
     integrate_overdamped_euler,
     integrate_symplectic_euler,
 )
+from .kernels.implicit_contact import BodyFrame, eval_implicit_ground
 from .laplace import LaplaceBeltrami
 from .runner import GuardedRunner, Stepper
 from .shell import Shell, world_value
@@ -442,8 +444,8 @@ class ShellDynamics(Stepper):
         self.dt = None
         self.runner = GuardedRunner(self._step, protected=lambda: [self.state.x, self.state.v], check=self._check,
                                     device=self.device, capture=self.capture, check_every=check_every,
-                                    modules=(kernels_shell, kernels_contact, kernels_dynamics, kernels_limit_surface,
-                                             kernels_reduce))  # fmt: skip
+                                    modules=(kernels_shell, kernels_contact, kernels_implicit_contact, kernels_dynamics,
+                                             kernels_limit_surface, kernels_reduce))  # fmt: skip
         shell.listen(self.notify_model_changed)
         self.set_time_step(dt, self.largest_frequency() if omega is None else omega, check_dt)
         v0 = self.state.numpy("v")
