@@ -156,9 +156,9 @@ def fma_kernel(iterations: int, out: wp.array(dtype=wp.float32)):
 
 
 def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: bool, gather_max_level: int,
-                staged_blocks=(), force_blocks=()) -> list:  # fmt: skip
-    """One level's kernel timings; the atomic force kernel in blocks of `force_blocks` threads and the staged
-    force kernels (`staged_blocks`, triangles per block) also record their largest force difference from the
+                staged_blocks=(), force_blocks=(), force_registers=()) -> list:  # fmt: skip
+    """One level's kernel timings; the atomic force kernel in blocks of `force_blocks` threads, with at most
+    `force_registers` registers a thread, and the staged force kernels (`staged_blocks`, triangles per block) also record their largest force difference from the
     atomic scatter's (the default launch, blocks of 64), relative to its largest force."""
     rows = []
     mesh, shell = walker_shell(level, device, dtype)
@@ -168,6 +168,7 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     shells = [("koiter forces, atomic scatter", dict())]
     shells += [("koiter forces, deterministic gather", dict(deterministic=True))] if level <= gather_max_level else []
     shells += [(f"koiter forces, atomic, {b} threads a block", dict(force_block=b)) for b in force_blocks]
+    shells += [(f"koiter forces, atomic, ≤ {r} registers", dict(force_registers=r)) for r in force_registers]
     shells += [(f"koiter forces, staged {b} per block", dict(staged_block=b)) for b in staged_blocks]
     reference = None
     for name, options in shells:
@@ -313,6 +314,8 @@ def main(argv=None) -> int:
                              "the CPU)")  # fmt: skip
     parser.add_argument("--force-blocks", type=int, nargs="*", default=[],
                         help="threads a block of extra rows of the atomic force kernel (its default launch: 64)")
+    parser.add_argument("--force-registers", type=int, nargs="*", default=[],
+                        help="registers a thread of extra rows of the atomic force kernel, the rest spilled (CUDA)")
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3, short timings (smoke test)")
@@ -329,7 +332,7 @@ def main(argv=None) -> int:
         rows = []
         for dtype in ("float32", "float64"):
             rows += kernel_rows(level, device.alias, dtype, budget, level <= args.numpy_max_level, args.gather_max_level,
-                                staged, args.force_blocks)  # fmt: skip
+                                staged, args.force_blocks, args.force_registers)  # fmt: skip
         kernels += rows
         report(rows, peaks)
     for level in step_levels:

@@ -1,5 +1,7 @@
 """Warp kernels and @wp.func helpers of wavewarp (installed as `wavewarp.kernels`)."""
 
+import functools
+
 import warp as wp
 
 SCALARS = (wp.float32, wp.float64)
@@ -41,3 +43,14 @@ def declare_overloads(kernel, **roles):
                 types[name] = element
         wp.overload(kernel, types)
     return kernel
+
+
+@functools.cache
+def register_capped(kernel, registers: int):
+    """`kernel` compiled for CUDA with at most `registers` a thread (`__maxnreg__`: what does not fit spills to
+    local memory, and more warps fit on an SM), in a module of its own, with the original's overloads. The same
+    code; the CPU ignores the cap."""
+    capped = wp.kernel(kernel.func, module="unique", cuda_max_registers=registers)
+    for overload in kernel.overloads.values():
+        wp.overload(capped, dict(overload.adj.arg_types))
+    return capped

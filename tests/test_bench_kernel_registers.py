@@ -7,6 +7,7 @@ import pytest
 import warp as wp
 
 from wavewarp.benchmarks.kernel_registers import cubin_registers, kernel_dtypes, occupancy
+from wavewarp.kernels import register_capped
 
 MODULE = '''
 import warp as wp
@@ -58,3 +59,20 @@ def test_registers_are_read_for_every_kernel_of_a_compiled_module(tmp_path, monk
     assert 1 <= copy < 32 and copy * 2 < product <= 255
     assert sorted(dtypes.values()) == ["float32", "float64"]
     del sys.modules["register_probe"]
+
+
+def test_a_register_cap_holds_in_the_compiled_code(tmp_path, monkeypatch):
+    """`register_capped(kernel, 32)`: the 6×6 float64 product compiled for sm_90 in at most 32 registers a thread
+    (the rest spilled), where uncapped it takes more."""
+    (tmp_path / "capped_probe.py").write_text(MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    import capped_probe
+
+    def forward_registers(module, folder):
+        paths = wp.compile_aot_module(module, arch=90, module_dir=str(tmp_path / folder), use_ptx=False)
+        registers = cubin_registers(paths[0].read_bytes())
+        return next(v for k, v in registers.items() if k.startswith("many_live_values_kernel") and "forward" in k)
+
+    capped = register_capped(capped_probe.many_live_values_kernel, 32)
+    assert forward_registers(capped.module, "capped") <= 32 < forward_registers(capped_probe, "free")
+    del sys.modules["capped_probe"]

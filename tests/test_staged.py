@@ -1,6 +1,7 @@
 """Koiter forces with each block's patch vertices staged in shared memory (kernels/staged.py): the
 per-block tables against a direct set computation, the forces against the atomic scatter's; the atomic
-scatter launched in other blocks (force_block) against its default launch."""
+scatter launched in other blocks (force_block) and with its registers capped (force_registers) against its default
+launch."""
 
 import numpy as np
 import pytest
@@ -67,15 +68,19 @@ def test_the_force_launchs_block_size_leaves_the_cpu_forces_as_they_are(rng):
     default, large = Shell(mesh, **ACTIVE, device="cpu"), Shell(mesh, **ACTIVE, force_block=256, device="cpu")
     assert default.force_block == 64 and large.force_block == 256 and large.twin("float32").force_block == 256
     assert np.array_equal(large.forces(x, c), default.forces(x, c))
+    capped = Shell(mesh, **ACTIVE, force_registers=64, device="cpu")
+    assert capped.twin("float64").force_registers == 64
+    assert np.array_equal(capped.forces(x, c), default.forces(x, c))
 
 
-@pytest.mark.skipif(not wp.is_cuda_available(), reason="the block size matters on CUDA only")
-@pytest.mark.parametrize("threads", [32, 128, 256])
-def test_forces_launched_in_other_blocks_equal_the_default_launchs_on_cuda(threads, rng):
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="the block size and the register cap matter on CUDA only")
+@pytest.mark.parametrize("launch", [dict(force_block=32), dict(force_block=128), dict(force_block=256),
+                                    dict(force_registers=64), dict(force_registers=96)])
+def test_forces_launched_in_other_blocks_or_fewer_registers_equal_the_default_launchs_on_cuda(launch, rng):
     mesh = icosphere(3.0, 3)
     x, c = mesh.vertices + 0.02 * rng.normal(size=mesh.vertices.shape), rng.random(mesh.n_vertices)
     default = Shell(mesh, **ACTIVE, device="cuda:0").forces(x, c)
-    other = Shell(mesh, **ACTIVE, force_block=threads, device="cuda:0").forces(x, c)
+    other = Shell(mesh, **ACTIVE, **launch, device="cuda:0").forces(x, c)
     np.testing.assert_allclose(other, default, rtol=0, atol=1e-12 * np.abs(default).max())
 
 
@@ -85,6 +90,10 @@ def test_forces_launched_in_other_blocks_equal_the_default_launchs_on_cuda(threa
         (dict(force_block=100), "force_block must be one of 32, 64"),
         (dict(force_block=512), "force_block must be one of"),
         (dict(force_block=True), "force_block must be one of"),
+        (dict(force_registers=16), "force_registers must be a whole number of registers from 24 to 255"),
+        (dict(force_registers=300), "force_registers must be"),
+        (dict(force_registers=64.0), "force_registers must be"),
+        (dict(force_registers=True), "force_registers must be"),
         (dict(staged_block=4, device="cpu"), "staged_block = 4 on the CPU"),
         (dict(staged_block=0), "staged_block must be a whole number"),
         (dict(staged_block=True), "staged_block must be a whole number"),

@@ -22,6 +22,7 @@ import warp as wp
 from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
+from .kernels import register_capped
 from .kernels.adjoint import eval_shell_rates
 from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
@@ -104,7 +105,8 @@ class Shell:
     CUDA, B = 1 on the CPU, where Warp runs a tile kernel's block as one lane); force_block, the threads
     of a block of the (atomic) force kernel's CUDA launch: a multiple of 32 up to 256 (the kernel's
     ~160 registers a thread let three 64-thread blocks run on an SM where one of 256 does: 64, the
-    default, is the fastest measured).
+    default, is the fastest measured); force_registers=N caps that kernel's registers a thread on CUDA
+    (24–255; None: the compiler's choice), the rest spilling to local memory.
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -112,7 +114,7 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 staged_block=None, force_block=64, device=None, dtype="float32"):  # fmt: skip
+                 staged_block=None, force_block=64, force_registers=None, device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
@@ -184,6 +186,13 @@ class Shell:
         if isinstance(force_block, bool) or force_block not in FORCE_BLOCKS:
             raise ValueError(f"force_block must be one of {', '.join(map(str, FORCE_BLOCKS))} threads, got {force_block!r}")
         self.force_block = int(force_block)
+        if force_registers is not None and (isinstance(force_registers, bool) or not isinstance(force_registers, int)
+                                            or not 24 <= force_registers <= 255):  # fmt: skip
+            raise ValueError(f"force_registers must be a whole number of registers from 24 to 255, or None (the "
+                             f"compiler's choice), got {force_registers!r}")  # fmt: skip
+        self.force_registers = force_registers
+        self._force_kernel = (shell_forces_kernel if force_registers is None
+                              else register_capped(shell_forces_kernel, force_registers))  # fmt: skip
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -209,7 +218,7 @@ class Shell:
         twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
                      bilayer_radius=self._bilayer_radius, staged_block=self.staged_block,
-                     force_block=self.force_block, device=self.device,
+                     force_block=self.force_block, force_registers=self.force_registers, device=self.device,
                      dtype=dtype)  # fmt: skip
         twin.rest_volume = self.rest_volume
         return twin
@@ -399,7 +408,7 @@ class Shell:
                             inputs=inputs + [self._energy_density, staged["block_vertices"], forces],
                             device=self.device)  # fmt: skip
         elif not self.deterministic:
-            wp.launch(shell_forces_kernel, dim=self.mesh.n_triangles, inputs=inputs,
+            wp.launch(self._force_kernel, dim=self.mesh.n_triangles, inputs=inputs,
                       outputs=[self._energy_density, forces], block_dim=self.force_block, device=self.device)  # fmt: skip
         else:
             wp.launch(shell_force_jets_kernel, dim=t.n_quadrature_points, inputs=inputs,
