@@ -3,8 +3,8 @@
 
     wavewarp bench kernel_registers --arch 90 --out benchmarks/results
 
-Each kernel module of `wavewarp.kernels` (those built on demand aside) is compiled for sm_ARCH to a
-cubin; each kernel's register count is its EIATTR_REGCOUNT entry in the cubin's .nv.info section, its
+Each kernel module of `wavewarp.kernels` (those built on demand aside; with the modules of its kernels
+compiled alone) is compiled for sm_ARCH to a cubin; each kernel's register count is its EIATTR_REGCOUNT entry in the cubin's .nv.info section, its
 dtype read from its first array argument in the generated CUDA source. The occupancy of a launch of
 `block` threads: an SM holds 65,536 registers, allocated per warp in units of 256, and at most 64 warps
 and 32 blocks (compute capability 8.0–9.0); shared memory is not counted (these kernels use none, the
@@ -78,12 +78,23 @@ def kernel_dtypes(source: str) -> dict:
     return dtypes
 
 
+def warp_modules(module) -> list:
+    """The Warp modules of a Python module of kernels: its own, and those of its kernels compiled in a module of
+    their own (`@wp.kernel(module="unique")`)."""
+    own = {k.module.name: k.module for k in vars(module).values()
+           if isinstance(k, wp.Kernel) and k.func.__module__ == module.__name__}  # fmt: skip
+    return [wp.get_module(module.__name__)] + [m for name, m in own.items() if name != module.__name__]
+
+
 def module_rows(module, arch: int, folder: str) -> list:
-    paths = wp.compile_aot_module(module, arch=arch, module_dir=folder, use_ptx=False)
-    registers = cubin_registers(paths[0].read_bytes())
-    source = next(p for p in os.listdir(folder) if p.endswith(".cu") and module.__name__ in p)
-    with open(os.path.join(folder, source)) as f:
-        dtypes = kernel_dtypes(f.read())
+    registers, dtypes = {}, {}
+    for index, compiled in enumerate(warp_modules(module)):
+        out = os.path.join(folder, str(index))
+        paths = wp.compile_aot_module(compiled, arch=arch, module_dir=out, use_ptx=False)
+        registers.update(cubin_registers(paths[0].read_bytes()))
+        source = next(p for p in os.listdir(out) if p.endswith(".cu") and compiled.name in p)
+        with open(os.path.join(out, source)) as f:
+            dtypes.update(kernel_dtypes(f.read()))
     rows = []
     for function, dtype in sorted(dtypes.items(), key=lambda item: (item[0].rsplit("_", 4)[0], item[1])):
         kernel = re.sub(r"_[0-9a-f]{8}_cuda_kernel_forward$", "", function)

@@ -271,7 +271,7 @@ def triangle_forces(
     return accumulated
 
 
-@wp.kernel
+@wp.kernel(module="unique")  # its own module: compiled once for its 64-thread launch, not the whole module twice
 def shell_forces_kernel(
     x: wp.array(dtype=Any),
     patch_start: wp.array(dtype=wp.int32),
