@@ -186,39 +186,24 @@ def implicit_contact_kernel(
     limit_forces[i] = f
 
 
-@wp.func
-def limit_coupling_at(
-    values: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any), ring_start: wp.array(dtype=wp.int32),
-    ring: wp.array(dtype=wp.int32), centre_weight: wp.array(dtype=Any), ring_weight: wp.array(dtype=Any), i: int,
-):  # fmt: skip
-    """(L M⁻¹ Lᵀ values)_i, each (Lᵀ values)_J formed in place over J's ring: the arithmetic of
-    `limit_transpose_kernel` into a zeroed buffer and then `limit_inverse_mass_gather`, bit for bit."""
-    zero = type(values[i])()
-    s = centre_weight[i] * inverse_mass[i] * (zero + limit_transpose_at(values, ring_start, ring, centre_weight,
-                                                                        ring_weight, i))  # fmt: skip
-    for k in range(ring_start[i], ring_start[i + 1]):
-        j = ring[k]
-        s += ring_weight[i] * inverse_mass[j] * (zero + limit_transpose_at(values, ring_start, ring, centre_weight,
-                                                                           ring_weight, j))  # fmt: skip
-    return s
-
-
 @wp.kernel
 def limit_first_contact_kernel(
-    p: wp.array(dtype=Any), u: wp.array(dtype=Any), indicator: wp.array(dtype=Any), inverse_mass: wp.array(dtype=Any),
-    ring_start: wp.array(dtype=wp.int32), ring: wp.array(dtype=wp.int32), centre_weight: wp.array(dtype=Any),
-    ring_weight: wp.array(dtype=Any), scale: Any, dt: Any, k: Any, beta: Any, mu: Any, k_f: Any,
-    body: wp.array(dtype=Any), response: wp.array(dtype=Any), normal_force: wp.array(dtype=Any),
-    limit_forces: wp.array(dtype=Any),
+    p: wp.array(dtype=Any), u: wp.array(dtype=Any), coupling_start: wp.array(dtype=wp.int32),
+    coupling_point: wp.array(dtype=wp.int32), coupling_value: wp.array(dtype=Any), scale: Any, dt: Any, k: Any,
+    beta: Any, mu: Any, k_f: Any, body: wp.array(dtype=Any), response: wp.array(dtype=Any),
+    normal_force: wp.array(dtype=Any), limit_forces: wp.array(dtype=Any),
 ):  # fmt: skip
-    """The implicit contact's first pass on the limit points in one launch: response_i = (L M⁻¹ Lᵀ 1_contact)_i,x
-    (`indicator` from `contact_indicator_kernel`; as `limit_response_kernel`), then the law alone
-    (`implicit_contact_kernel`). Points above the ground have no force: response 0, no gather."""
+    """The implicit contact's first pass on the limit points in one launch: a point on or below the ground gets its
+    response r_i = Σ_k C_ik over the points k on or below it (C = L M⁻¹ Lᵀ, `Coupling`; the row sums of
+    `limit_response_kernel`), then its law alone (`implicit_contact_kernel`). Points above the ground have no force:
+    response 0."""
     i = wp.tid()
     z = p[i][2]
     r = type(z)(0.0)
     if z <= r:
-        r = limit_coupling_at(indicator, inverse_mass, ring_start, ring, centre_weight, ring_weight, i)[0]
+        for m in range(coupling_start[i], coupling_start[i + 1]):
+            if p[coupling_point[m]][2] <= type(z)(0.0):
+                r += coupling_value[m]
     response[i] = r
     shift = body[i // (p.shape[0] // body.shape[0])]
     fn, f = implicit_law(z, u[i], scale * r, dt, k, beta, mu, k_f, shift)
@@ -229,20 +214,22 @@ def limit_first_contact_kernel(
 @wp.kernel
 def limit_contact_sweep_kernel(
     p: wp.array(dtype=Any), predictor: wp.array(dtype=Any), forces: wp.array(dtype=Any),
-    inverse_mass: wp.array(dtype=Any), ring_start: wp.array(dtype=wp.int32), ring: wp.array(dtype=wp.int32),
-    centre_weight: wp.array(dtype=Any), ring_weight: wp.array(dtype=Any), response: wp.array(dtype=Any), scale: Any,
-    dt: Any, k: Any, beta: Any, mu: Any, k_f: Any, body: wp.array(dtype=Any), others: wp.array(dtype=Any),
-    normal_force: wp.array(dtype=Any), new_forces: wp.array(dtype=Any),
+    coupling_start: wp.array(dtype=wp.int32), coupling_point: wp.array(dtype=wp.int32),
+    coupling_value: wp.array(dtype=Any), response: wp.array(dtype=Any), scale: Any, dt: Any, k: Any, beta: Any,
+    mu: Any, k_f: Any, body: wp.array(dtype=Any), others: wp.array(dtype=Any), normal_force: wp.array(dtype=Any),
+    new_forces: wp.array(dtype=Any),
 ):  # fmt: skip
-    """One Jacobi sweep on the limit points in one launch: others_i = u*_i + scale ((L M⁻¹ Lᵀ f)_i - r_i f_i)
-    (`limit_coupled_velocity_kernel` after the transpose, bit for bit), then the law at others_i into
-    `new_forces` (`implicit_contact_kernel`). A point above the ground has no force whatever its velocity:
-    it skips the gather and keeps others_i = u*_i."""
+    """One Jacobi sweep on the limit points in one launch: others_i = u*_i + scale ((C f)_i - r_i f_i) over point i's
+    row of C = L M⁻¹ Lᵀ (`limit_coupled_velocity_kernel`'s velocity, summed in another order; f is 0 off the
+    ground), then the law at others_i into `new_forces` (`implicit_contact_kernel`). A point above the ground has
+    no force whatever its velocity: it keeps others_i = u*_i."""
     i = wp.tid()
     z = p[i][2]
     o = predictor[i]
     if z <= type(z)(0.0):
-        s = limit_coupling_at(forces, inverse_mass, ring_start, ring, centre_weight, ring_weight, i)
+        s = type(o)()
+        for m in range(coupling_start[i], coupling_start[i + 1]):
+            s += coupling_value[m] * forces[coupling_point[m]]
         o = o + scale * (s - response[i] * forces[i])
     others[i] = o
     shift = body[i // (p.shape[0] // body.shape[0])]
@@ -347,14 +334,13 @@ declare_overloads(quadrature_coupled_velocity_kernel, load="vec3[]", inverse_mas
 declare_overloads(implicit_contact_kernel, p="vec3[]", u="vec3[]", response="scalar[]", scale="scalar", dt="scalar",
                   k="scalar", beta="scalar", mu="scalar", k_f="scalar", body="vec3[]", normal_force="scalar[]",
                   limit_forces="vec3[]")  # fmt: skip
-declare_overloads(limit_first_contact_kernel, p="vec3[]", u="vec3[]", indicator="vec3[]", inverse_mass="scalar[]",
-                  centre_weight="scalar[]", ring_weight="scalar[]", scale="scalar", dt="scalar", k="scalar", beta="scalar",
-                  mu="scalar", k_f="scalar", body="vec3[]", response="scalar[]", normal_force="scalar[]",
-                  limit_forces="vec3[]")  # fmt: skip
-declare_overloads(limit_contact_sweep_kernel, p="vec3[]", predictor="vec3[]", forces="vec3[]", inverse_mass="scalar[]",
-                  centre_weight="scalar[]", ring_weight="scalar[]", response="scalar[]", scale="scalar", dt="scalar",
-                  k="scalar", beta="scalar", mu="scalar", k_f="scalar", body="vec3[]", others="vec3[]",
-                  normal_force="scalar[]", new_forces="vec3[]")  # fmt: skip
+declare_overloads(limit_first_contact_kernel, p="vec3[]", u="vec3[]", coupling_value="scalar[]", scale="scalar",
+                  dt="scalar", k="scalar", beta="scalar", mu="scalar", k_f="scalar", body="vec3[]",
+                  response="scalar[]", normal_force="scalar[]", limit_forces="vec3[]")  # fmt: skip
+declare_overloads(limit_contact_sweep_kernel, p="vec3[]", predictor="vec3[]", forces="vec3[]",
+                  coupling_value="scalar[]", response="scalar[]", scale="scalar", dt="scalar", k="scalar",
+                  beta="scalar", mu="scalar", k_f="scalar", body="vec3[]", others="vec3[]", normal_force="scalar[]",
+                  new_forces="vec3[]")  # fmt: skip
 declare_overloads(limit_contact_velocity_kernel, forces="vec3[]", centre_weight="scalar[]", ring_weight="scalar[]",
                   inverse_mass="scalar[]", scale="scalar", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(body_friction_sums_kernel, p="vec3[]", u="vec3[]", response="scalar[]", weight="scalar[]",
@@ -387,6 +373,26 @@ class BodyFrame:
     iterations: tuple = (2, 2)
 
 
+@dataclass
+class Coupling:
+    """C = L M⁻¹ Lᵀ on the limit points as CSR on the device (`start`, `point`, `value`): the implicit contact's
+    sweeps' operator, fixed by the mesh and the masses (`wavewarp.geometry.limit_coupling` forms it)."""
+
+    start: wp.array
+    point: wp.array
+    value: wp.array
+
+    @classmethod
+    def of(cls, csr: tuple, scalar, device=None) -> "Coupling":
+        start, point, value = csr
+        with wp.ScopedDevice(device):
+            return cls(wp.array(start, dtype=wp.int32), wp.array(point, dtype=wp.int32),
+                       wp.array(value, dtype=scalar))  # fmt: skip
+
+    def arrays(self) -> list:
+        return [self.start, self.point, self.value]
+
+
 def solve_body_velocity(body: BodyFrame, points: wp.array, u: wp.array, response: wp.array, laws: list,
                         iterations: int) -> None:  # fmt: skip
     """`iterations` Weiszfeld steps of each world's body velocity U on its net horizontal force (`body_friction_sums_kernel`,
@@ -404,20 +410,20 @@ def solve_body_velocity(body: BodyFrame, points: wp.array, u: wp.array, response
 def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.array, scale: float, dt: float, mask,
                          patch: list, rest_area, points: wp.array, velocities: wp.array, response: wp.array,
                          others: wp.array, normal_force: wp.array, point_forces: wp.array, load: wp.array,
-                         body: BodyFrame) -> None:  # fmt: skip
+                         body: BodyFrame, coupling: Coupling | None = None) -> None:  # fmt: skip
     """The implicit contact step: v holds the velocities without contact (u* = L v on the ground's
     points); each point's force is solved against its own response (`implicit_contact_kernel`), then
     refined by `ground.sweeps` Jacobi sweeps in which each point sees the others' forces, then
     v += scale M⁻¹ Lᵀ f (+ U, `body`) and x += dt v. `response`, `others` and `load` are scratch. On the limit
-    points in the lab frame (the scenes' default) each pass is one launch (`eval_limit_sweeps`)."""
+    points in the lab frame (the scenes' default) each pass is one launch (`eval_limit_sweeps`, with `coupling`)."""
     n, s, device = len(points), scalar_of(normal_force), x.device
     point = ground.contact == "point"
     tables = [mask.ring_start, mask.ring, mask.centre_weight, mask.ring_weight] if point else list(patch)
     laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
     ground_motion(ground, x, v, mask, patch, points, velocities)
     if point and not body.solve:
-        eval_limit_sweeps(ground.sweeps, points, velocities, inverse_mass, tables, laws, body.velocity, response,
-                          others, normal_force, point_forces, load)  # fmt: skip
+        eval_limit_sweeps(ground.sweeps, points, velocities, coupling, laws, body.velocity, response, others,
+                          normal_force, point_forces, load)  # fmt: skip
         wp.launch(limit_contact_velocity_kernel, dim=len(x), inputs=[point_forces, *tables, inverse_mass, *laws[:2]],
                   outputs=[x, v], device=device)  # fmt: skip
         return
@@ -449,19 +455,17 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
               device=device)  # fmt: skip
 
 
-def eval_limit_sweeps(sweeps: int, points: wp.array, velocities: wp.array, inverse_mass: wp.array, ring: list,
-                      laws: list, body: wp.array, response: wp.array, others: wp.array, normal_force: wp.array,
-                      forces: wp.array, spare: wp.array) -> None:  # fmt: skip
-    """The implicit contact's passes on the limit points (lab frame), one launch each: the first pass, then `sweeps`
-    Jacobi sweeps reading one force buffer and writing the other (`forces`, `spare`), the last into `forces`
-    (the indicator of the contact set goes first into the buffer the first pass does not write). Each pass equals
-    `eval_implicit_ground`'s separate launches bit for bit; `ring`: the limit mask's tables."""
+def eval_limit_sweeps(sweeps: int, points: wp.array, velocities: wp.array, coupling: Coupling, laws: list,
+                      body: wp.array, response: wp.array, others: wp.array, normal_force: wp.array, forces: wp.array,
+                      spare: wp.array) -> None:  # fmt: skip
+    """The implicit contact's passes on the limit points (lab frame), one launch each: the first pass (responses,
+    the law alone), then `sweeps` Jacobi sweeps over the rows of `coupling`, reading one force buffer and writing the
+    other (`forces`, `spare`), the last into `forces`."""
     n, device = len(points), points.device
     buffers = (forces, spare) if sweeps % 2 == 0 else (spare, forces)  # pass s writes buffers[s % 2]
-    wp.launch(contact_indicator_kernel, dim=n, inputs=[points], outputs=[buffers[1]], device=device)
-    wp.launch(limit_first_contact_kernel, dim=n, inputs=[points, velocities, buffers[1], inverse_mass, *ring, *laws, body],
+    wp.launch(limit_first_contact_kernel, dim=n, inputs=[points, velocities, *coupling.arrays(), *laws, body],
               outputs=[response, normal_force, buffers[0]], device=device)  # fmt: skip
     for sweep in range(1, sweeps + 1):
         wp.launch(limit_contact_sweep_kernel, dim=n,
-                  inputs=[points, velocities, buffers[(sweep - 1) % 2], inverse_mass, *ring, response, *laws, body],
+                  inputs=[points, velocities, buffers[(sweep - 1) % 2], *coupling.arrays(), response, *laws, body],
                   outputs=[others, normal_force, buffers[sweep % 2]], device=device)  # fmt: skip

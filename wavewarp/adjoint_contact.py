@@ -29,6 +29,7 @@ from dataclasses import replace
 
 import warp as wp
 
+from .geometry import limit_coupling
 from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_weighted_dot
 from .kernels.adjoint_contact import (
     eval_body_step_adjoint,
@@ -44,6 +45,7 @@ from .kernels.adjoint_shape import (
 )
 from .kernels.contact import ground_motion, spread_to_control_points
 from .kernels.implicit_contact import (
+    Coupling,
     add_body_velocity_kernel,
     body_friction_sums_kernel,
     contact_indicator_kernel,
@@ -86,6 +88,8 @@ class ImplicitContactAdjoint:
             self.response_hat, self.indicator = wp.zeros(n, dtype=wp.float64), wp.zeros(n, dtype=wp.vec3d)
             self.no_weights = wp.zeros(0, dtype=wp.float64)
             self.spread = wp.zeros(vertices, dtype=wp.vec3d)  # S f of a pass (the masses' share)
+        self.coupling = (Coupling.of(limit_coupling(solver.shell.mesh, 1.0 / solver.mass), wp.float64, solver.device)
+                         if self.point else None)  # fmt: skip
         self.frame = solver.body  # kernels/implicit_contact.py BodyFrame
         if self.frame.solve:
             first, later = self.frame.iterations
@@ -137,14 +141,12 @@ class ImplicitContactAdjoint:
         """`forward` on the limit points in the lab frame: the solver's one launch per pass
         (kernels/implicit_contact.py `eval_limit_sweeps`), each pass into its own buffers."""
         device, n, laws = self.p.device, len(self.p), implicit_laws(self.ground, scale, dt)
-        wp.launch(contact_indicator_kernel, dim=n, inputs=[self.p], outputs=[self.indicator], device=device)
-        wp.launch(limit_first_contact_kernel, dim=n,
-                  inputs=[self.p, self.u_star, self.indicator, self.solver.inverse_mass, *self.tables, *laws, self.body],
+        coupling = self.coupling.arrays()
+        wp.launch(limit_first_contact_kernel, dim=n, inputs=[self.p, self.u_star, *coupling, *laws, self.body],
                   outputs=[self.response, self.normal, self.forces[0]], device=device)  # fmt: skip
         for s in range(1, len(self.forces)):
             wp.launch(limit_contact_sweep_kernel, dim=n,
-                      inputs=[self.p, self.u_star, self.forces[s - 1], self.solver.inverse_mass, *self.tables,
-                              self.response, *laws, self.body],
+                      inputs=[self.p, self.u_star, self.forces[s - 1], *coupling, self.response, *laws, self.body],
                       outputs=[self.others[s], self.normal, self.forces[s]], device=device)  # fmt: skip
 
     def _sums(self, velocities, body, laws) -> None:

@@ -36,7 +36,7 @@ import warp as wp
 
 from .checks import AUTOMATIC_DT, finite, plain, positive
 from .device import reduction_threads
-from .geometry import LimitMask, checked_positions, evaluate
+from .geometry import LimitMask, checked_positions, evaluate, limit_coupling
 from .kernels import contact as kernels_contact
 from .kernels import dynamics as kernels_dynamics
 from .kernels import implicit_contact as kernels_implicit_contact
@@ -51,7 +51,7 @@ from .kernels.dynamics import (
     integrate_overdamped_euler,
     integrate_symplectic_euler,
 )
-from .kernels.implicit_contact import BodyFrame, eval_implicit_ground
+from .kernels.implicit_contact import BodyFrame, Coupling, eval_implicit_ground
 from .laplace import LaplaceBeltrami
 from .runner import GuardedRunner, Stepper
 from .shell import Shell, world_value
@@ -153,6 +153,9 @@ class InertialSolver:
             self._normal_force = wp.zeros(points, dtype=self.scalar)
             self._response = wp.zeros(points if self.implicit else 0, dtype=self.scalar)
             self._others = wp.zeros(points if self.implicit else 0, dtype=self.vec3)
+            # the implicit sweeps' operator L M⁻¹ Lᵀ (limit points)
+            self._coupling = (Coupling.of(limit_coupling(mesh, 1.0 / self.mass), self.scalar)
+                              if self.implicit and points == n else None)  # fmt: skip
             # dω̄⁰ at each quadrature point (area contact)
             self._rest_area = evaluate(shell.tables, shell.tables.positions())["area"] if points != n else None
             self.flag = wp.zeros(self.worlds, dtype=wp.int32)  # per world
@@ -252,7 +255,7 @@ class InertialSolver:
                 eval_implicit_ground(self.ground, x, v, self._inverse_mass, self._response_scale(dt), dt, self.mask,
                                      self.shell.tables.patch(), self._rest_area, self._limit_x, self._limit_v,
                                      self._response, self._others, self._normal_force, self._limit_forces,
-                                     self._forces, self.body)  # fmt: skip
+                                     self._forces, self.body, self._coupling)  # fmt: skip
                 return
             self.contact_forces(x, v)
             self._integrate(x, v, dt)

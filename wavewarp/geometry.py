@@ -10,6 +10,7 @@ import weakref
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 import warp as wp
 
 from .device import mat22, numpy_dtype, resolve_device, resolve_dtype, vec3, vec6
@@ -129,6 +130,20 @@ def checked_positions(x, n_vertices: int, name: str = "x") -> np.ndarray:
         i = int(np.flatnonzero(~np.all(np.isfinite(x), axis=1))[0])
         raise ValueError(f"{name}[{i}] = {x[i].tolist()} is not finite (NaN or Inf)")
     return x
+
+
+def limit_coupling(mesh: Mesh, inverse_mass: np.ndarray) -> tuple:
+    """C = L M⁻¹ Lᵀ (L Loop's limit mask, M⁻¹ = diag(inverse_mass)) as CSR (row start, columns, values; float64): a
+    control point's coupling to the points within two rings, the implicit contact's sweeps' operator."""
+    ring_start, ring, centre, neighbour = _limit_mask_csr(mesh)
+    n = mesh.n_vertices
+    rows = np.concatenate([np.arange(n), np.repeat(np.arange(n), np.diff(ring_start))])
+    columns = np.concatenate([np.arange(n), ring])
+    values = np.concatenate([centre, np.repeat(neighbour, np.diff(ring_start))])
+    limit = sp.csr_matrix((values, (rows, columns)), shape=(n, n))
+    coupling = (limit @ sp.diags(np.asarray(inverse_mass, dtype=np.float64)) @ limit.T).tocsr()
+    coupling.sort_indices()
+    return coupling.indptr, coupling.indices, coupling.data
 
 
 def _limit_mask_csr(mesh: Mesh):
