@@ -27,6 +27,7 @@ import warp as wp
 
 from wavewarp import kernels
 from wavewarp.io import write_json
+from wavewarp.precompile import warp_modules
 
 REGISTERS_PER_SM, WARPS_PER_SM, BLOCKS_PER_SM, ALLOCATION_UNIT = 65536, 64, 32, 256
 REGCOUNT, SVAL_FORMAT = 0x2F, 0x04  # EIATTR_REGCOUNT; an entry with a 4-byte size and a value
@@ -76,14 +77,6 @@ def kernel_dtypes(source: str) -> dict:
         found = re.search(r"wp::(float32|float64)", match.group(2))
         dtypes[match.group(1)] = found.group(1) if found else "-"
     return dtypes
-
-
-def warp_modules(module) -> list:
-    """The Warp modules of a Python module of kernels: its own, and those of its kernels compiled in a module of
-    their own (`@wp.kernel(module="unique")`)."""
-    own = {k.module.name: k.module for k in vars(module).values()
-           if isinstance(k, wp.Kernel) and k.func.__module__ == module.__name__}  # fmt: skip
-    return [wp.get_module(module.__name__)] + [m for name, m in own.items() if name != module.__name__]
 
 
 def module_rows(module, arch: int, folder: str) -> list:

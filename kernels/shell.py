@@ -271,7 +271,7 @@ def triangle_forces(
     return accumulated
 
 
-@wp.kernel(module="unique")  # its own module: compiled once for its 64-thread launch, not the whole module twice
+@wp.kernel(module="unique")  # its own module: compiled for its launch (FORCE_BLOCK), not the whole module twice
 def shell_forces_kernel(
     x: wp.array(dtype=Any),
     patch_start: wp.array(dtype=wp.int32),
@@ -555,6 +555,8 @@ declare_overloads(bilayer_reference_kernel, c="scalar[]", weights="scalar[]", re
                   rest_curvature="mat22[]", AC="scalar[]", bilayer_A="scalar[]", **_PATCH, **_REFERENCE)  # fmt: skip
 declare_overloads(koiter_energy_kernel, x="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
 declare_overloads(shell_forces_kernel, x="vec3[]", weights="scalar[]", forces="vec3[]", **_PATCH, **_REFERENCE, **_MODULI)
+FORCE_BLOCK = 64  # threads a block of the force kernel's launch: its module's default, what it compiles for
+wp.set_module_options({"block_dim": FORCE_BLOCK}, shell_forces_kernel.module)
 declare_overloads(shell_force_jets_kernel, x="vec3[]", weights="scalar[]", jets="vec3[,]", **_PATCH, **_REFERENCE,
                   **_MODULI)  # fmt: skip
 declare_overloads(volume_terms_kernel, x="vec3[]", weights="scalar[]", **_PATCH)

@@ -28,6 +28,7 @@ from .adjoint import ADJOINT_PARAMETERS, walker_adjoint_gradient
 from .io import check_writable
 from .mesh import cube, icosphere, load, prism
 from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
+from .precompile import precompile
 from .relax import RelaxationError
 from .sizing import check_run_size
 from .sweep import SweepSpec, local_cluster, parse_grid, sweep
@@ -148,6 +149,20 @@ def _cluster(args) -> int:
         except KeyboardInterrupt:
             pass
     print("wavewarp cluster: stopped; the workers' compiled kernels are in this machine's Warp cache")
+    return 0
+
+
+def _precompile(args) -> int:
+    """Every kernel module compiled for the CUDA architectures `--arch` into the kernel cache (`--cache`)."""
+    bad = [arch for arch in args.arch if not 50 <= arch <= 200]
+    if bad:
+        raise ValueError(f"--arch {' '.join(map(str, bad))}: give compute capabilities × 10, e.g. 90 for an H100 or H200")
+    if args.cache is not None:  # read when Warp starts, as on the GPU machines
+        os.environ["WARP_CACHE_PATH"] = args.cache
+    start = time.perf_counter()
+    paths = precompile(args.arch)
+    print(f"{len(paths)} cubins in {wp.config.kernel_cache_dir} ({time.perf_counter() - start:.0f} s); give the GPU "
+          "machines this cache (WARP_CACHE_PATH) and they load the kernels instead of compiling them")  # fmt: skip
     return 0
 
 
@@ -397,6 +412,12 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     cluster.add_argument("--workers", type=int, default=None, help="CPU workers (default: one per core)")
     cluster.add_argument("--port", type=int, default=8786, help="the scheduler's port (default 8786; 0: any free one)")
     cluster.set_defaults(run=_cluster)
+    ahead = commands.add_parser("precompile", help="compile the CUDA kernels into Warp's kernel cache ahead of time "
+                                "(no GPU needed): GPU machines and sweep workers given the cache load them instead")  # fmt: skip
+    ahead.add_argument("--arch", type=int, nargs="+", default=[90],
+                       help="CUDA compute capabilities × 10 (default 90: H100, H200; 80: A100)")  # fmt: skip
+    ahead.add_argument("--cache", default=None, help="the kernel cache folder (default: WARP_CACHE_PATH or Warp's own)")
+    ahead.set_defaults(run=_precompile)
     draw = commands.add_parser("render", help="draw a mesh's Loop limit surface to USD, coloured by mean curvature")
     draw.add_argument("--mesh", default="icosphere", help="icosphere, cube, prism or a mesh file (default icosphere)")
     draw.add_argument("--level", type=int, default=3, help="icosphere level, or cube/prism divisions / 2 (default 3)")

@@ -28,6 +28,7 @@ from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
+    FORCE_BLOCK,
     MAX_PATCH,
     VolumeMoments,
     bilayer_reference_kernel,
@@ -50,7 +51,7 @@ from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
-FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (the module's launch bound is 256)
+FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (each compiles its own variant)
 
 
 def per_world(name: str, value, worlds: int, check=finite) -> np.ndarray:
@@ -114,7 +115,8 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 staged_block=None, force_block=64, force_registers=None, device=None, dtype="float32"):  # fmt: skip
+                 staged_block=None, force_block=FORCE_BLOCK, force_registers=None, device=None,
+                 dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh

@@ -1,0 +1,43 @@
+"""CUDA kernels compiled ahead of time into Warp's kernel cache, on any machine (NVRTC; no GPU needed).
+
+A fresh GPU machine otherwise compiles every kernel module a run launches before its first step (about two
+minutes for a walker and its gradient on an H200), and every worker of a sweep with its own cache does the same.
+`precompile([90])` writes each module's sm_90 code where Warp's loader looks for it (`WARP_CACHE_PATH`), for the
+launch configurations the code uses: the module default of 256 threads a block, and the force kernel's own
+(`kernels.shell.FORCE_BLOCK`). Copied or shared with the GPU machines, the cache turns their compiles into loads.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+import warp as wp
+
+from . import kernels
+
+
+def kernel_modules() -> list:
+    """The Python modules of `wavewarp.kernels` that build their kernels when imported (not those built on demand)."""
+    return [importlib.import_module(f"{kernels.__name__}.{m.name}") for m in pkgutil.iter_modules(kernels.__path__)
+            if m.name not in kernels.BUILT_ON_DEMAND]  # fmt: skip
+
+
+def warp_modules(module) -> list:
+    """The Warp modules of a Python module of kernels: its own, and those of its kernels compiled in a module of
+    their own (`@wp.kernel(module="unique")`)."""
+    own = {k.module.name: k.module for k in vars(module).values()
+           if isinstance(k, wp.Kernel) and k.func.__module__ == module.__name__}  # fmt: skip
+    return [wp.get_module(module.__name__)] + [m for name, m in own.items() if name != module.__name__]
+
+
+def precompile(archs, modules=None, report=print) -> list:
+    """Compile every Warp module of `modules` (Python modules of `wavewarp.kernels`; default all) for each CUDA
+    architecture in `archs` (compute capability × 10) as cubins into the kernel cache; the artifacts' paths."""
+    wp.init()
+    paths = []
+    for module in kernel_modules() if modules is None else modules:
+        for compiled in warp_modules(module):
+            paths += wp.compile_aot_module(compiled, arch=list(archs), use_ptx=False)
+            report(f"{compiled.name}: sm_{', sm_'.join(map(str, archs))}")
+    return paths
