@@ -27,7 +27,7 @@ import warp as wp
 
 from wavewarp import kernels
 from wavewarp.io import write_json
-from wavewarp.precompile import warp_modules
+from wavewarp.kernels import warp_modules
 
 REGISTERS_PER_SM, WARPS_PER_SM, BLOCKS_PER_SM, ALLOCATION_UNIT = 65536, 64, 32, 256
 REGCOUNT, SVAL_FORMAT = 0x2F, 0x04  # EIATTR_REGCOUNT; an entry with a 4-byte size and a value

@@ -54,3 +54,11 @@ def register_capped(kernel, registers: int):
     for overload in kernel.overloads.values():
         wp.overload(capped, dict(overload.adj.arg_types))
     return capped
+
+
+def warp_modules(module) -> list:
+    """The Warp modules of a Python module of kernels: its own, and those of its kernels compiled in a module of
+    their own (`@wp.kernel(module="unique")`)."""
+    own = {k.module.name: k.module for k in vars(module).values()
+           if isinstance(k, wp.Kernel) and k.func.__module__ == module.__name__}  # fmt: skip
+    return [wp.get_module(module.__name__)] + [m for name, m in own.items() if name != module.__name__]

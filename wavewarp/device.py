@@ -13,6 +13,7 @@ import numpy as np
 import warp as wp
 
 from . import kernels
+from .kernels import warp_modules
 from .kernels.reduce import REDUCTION_BLOCK, whole_blocks, world_sum_kernel
 
 DTYPES = {"float32": wp.float32, "float64": wp.float64}
@@ -60,8 +61,8 @@ def set_deterministic(on: bool) -> None:
         return
     for info in pkgutil.iter_modules(kernels.__path__):
         records = DETERMINISTIC_RECORDS.get(info.name, DETERMINISTIC_RECORDS["default"]) if on else 0
-        wp.set_module_options({"deterministic": mode, "deterministic_max_records": records},
-                              module=importlib.import_module(f"{kernels.__name__}.{info.name}"))  # fmt: skip
+        for compiled in warp_modules(importlib.import_module(f"{kernels.__name__}.{info.name}")):
+            wp.set_module_options({"deterministic": mode, "deterministic_max_records": records}, module=compiled)
 
 
 def deterministic_default(deterministic=None) -> bool:
@@ -159,8 +160,9 @@ def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool,
         for length, repeats in graph_launches(steps, graph_steps):
             graph = graphs.get(length)
             if graph is None:
-                for module in modules:
-                    wp.load_module(module, device=device)
+                for module in modules:  # with its kernels compiled alone, each for its own default launch
+                    for compiled in warp_modules(module):
+                        wp.load_module(compiled, device=device)
                 with wp.ScopedCapture(device=device, force_module_load=False) as scope:
                     for _ in range(length):
                         step()

@@ -15,20 +15,13 @@ import pkgutil
 import warp as wp
 
 from . import kernels
+from .kernels import warp_modules
 
 
 def kernel_modules() -> list:
     """The Python modules of `wavewarp.kernels` that build their kernels when imported (not those built on demand)."""
     return [importlib.import_module(f"{kernels.__name__}.{m.name}") for m in pkgutil.iter_modules(kernels.__path__)
             if m.name not in kernels.BUILT_ON_DEMAND]  # fmt: skip
-
-
-def warp_modules(module) -> list:
-    """The Warp modules of a Python module of kernels: its own, and those of its kernels compiled in a module of
-    their own (`@wp.kernel(module="unique")`)."""
-    own = {k.module.name: k.module for k in vars(module).values()
-           if isinstance(k, wp.Kernel) and k.func.__module__ == module.__name__}  # fmt: skip
-    return [wp.get_module(module.__name__)] + [m for name, m in own.items() if name != module.__name__]
 
 
 def precompile(archs, modules=None, report=print) -> list:
