@@ -92,10 +92,10 @@ def ascend(objective_and_gradient, theta: dict, *, iterations: int, rate: float,
     for row in history:
         if row["accepted"]:
             best = row
-    if history:
-        rate = history[-1]["rate"]
-        theta = log_step(best["theta"], direction(best["gradient"]), rate, lengths)
+    rate = history[-1]["rate"] if history else rate
     for iteration in range(len(history), iterations):
+        if history:  # the step from the best θ so far
+            theta = log_step(best["theta"], direction(best["gradient"]), rate, lengths)
         started = time.perf_counter()
         value, gradient = objective_and_gradient(theta)
         accepted = bool(best is None or value > best["J"])
@@ -109,7 +109,6 @@ def ascend(objective_and_gradient, theta: dict, *, iterations: int, rate: float,
                f"{history[-1]['seconds']:.1f} s)")  # fmt: skip
         if on_iteration is not None:
             on_iteration(history)
-        theta = log_step(best["theta"], direction(best["gradient"]), rate, lengths)
     return history
 
 

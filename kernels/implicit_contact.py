@@ -422,8 +422,9 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
     laws = [s(scale), s(dt), s(ground.stiffness), s(ground.damping), s(ground.friction), s(ground.sharpness)]
     ground_motion(ground, x, v, mask, patch, points, velocities)
     if point and not body.solve:
-        eval_limit_sweeps(ground.sweeps, points, velocities, coupling, laws, body.velocity, response, others,
-                          normal_force, point_forces, load)  # fmt: skip
+        passes = [(point_forces, load)[(ground.sweeps - s) % 2] for s in range(ground.sweeps + 1)]  # the last: f
+        eval_limit_sweeps(points, velocities, coupling, laws, body.velocity, response, normal_force, passes,
+                          [others] * len(passes))  # fmt: skip
         wp.launch(limit_contact_velocity_kernel, dim=len(x), inputs=[point_forces, *tables, inverse_mass, *laws[:2]],
                   outputs=[x, v], device=device)  # fmt: skip
         return
@@ -455,17 +456,16 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
               device=device)  # fmt: skip
 
 
-def eval_limit_sweeps(sweeps: int, points: wp.array, velocities: wp.array, coupling: Coupling, laws: list,
-                      body: wp.array, response: wp.array, others: wp.array, normal_force: wp.array, forces: wp.array,
-                      spare: wp.array) -> None:  # fmt: skip
+def eval_limit_sweeps(points: wp.array, velocities: wp.array, coupling: Coupling, laws: list, body: wp.array,
+                      response: wp.array, normal_force: wp.array, forces: list, others: list) -> None:  # fmt: skip
     """The implicit contact's passes on the limit points (lab frame), one launch each: the first pass (responses,
-    the law alone), then `sweeps` Jacobi sweeps over the rows of `coupling`, reading one force buffer and writing the
-    other (`forces`, `spare`), the last into `forces`."""
+    the law alone) into forces[0], then a Jacobi sweep per further entry of `forces` over the rows of `coupling`,
+    sweep s reading forces[s - 1] and writing forces[s] and others[s] (the solver alternates two buffers, the
+    adjoint keeps every pass)."""
     n, device = len(points), points.device
-    buffers = (forces, spare) if sweeps % 2 == 0 else (spare, forces)  # pass s writes buffers[s % 2]
     wp.launch(limit_first_contact_kernel, dim=n, inputs=[points, velocities, *coupling.arrays(), *laws, body],
-              outputs=[response, normal_force, buffers[0]], device=device)  # fmt: skip
-    for sweep in range(1, sweeps + 1):
+              outputs=[response, normal_force, forces[0]], device=device)  # fmt: skip
+    for sweep in range(1, len(forces)):
         wp.launch(limit_contact_sweep_kernel, dim=n,
-                  inputs=[points, velocities, buffers[(sweep - 1) % 2], *coupling.arrays(), response, *laws, body],
-                  outputs=[others, normal_force, buffers[sweep % 2]], device=device)  # fmt: skip
+                  inputs=[points, velocities, forces[sweep - 1], *coupling.arrays(), response, *laws, body],
+                  outputs=[others[sweep], normal_force, forces[sweep]], device=device)  # fmt: skip

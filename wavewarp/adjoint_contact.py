@@ -49,10 +49,9 @@ from .kernels.implicit_contact import (
     add_body_velocity_kernel,
     body_friction_sums_kernel,
     contact_indicator_kernel,
+    eval_limit_sweeps,
     implicit_contact_kernel,
-    limit_contact_sweep_kernel,
     limit_coupled_velocity_kernel,
-    limit_first_contact_kernel,
     limit_response_kernel,
     quadrature_coupled_velocity_kernel,
     quadrature_response_kernel,
@@ -117,8 +116,9 @@ class ImplicitContactAdjoint:
         """The contact solve at positions x from the predictor v_star, every sweep's forces and velocities kept."""
         device, n = x.device, len(self.p)
         ground_motion(self.ground, x, v_star, self.mask, self.patch, self.p, self.u_star)
-        if self.point and not self.frame.solve:
-            self._forward_fused(scale, dt)
+        if self.point and not self.frame.solve:  # the solver's one launch a pass, each pass into its own buffers
+            eval_limit_sweeps(self.p, self.u_star, self.coupling, implicit_laws(self.ground, scale, dt), self.body,
+                              self.response, self.normal, self.forces, self.others)  # fmt: skip
             return
         wp.launch(contact_indicator_kernel, dim=n, inputs=[self.p], outputs=[self.forces[0]], device=device)
         self.load.zero_()
@@ -136,18 +136,6 @@ class ImplicitContactAdjoint:
             body = self._solve_body(s, velocities, laws) if self.frame.solve else self.body
             wp.launch(implicit_contact_kernel, dim=n, inputs=[self.p, velocities, self.response, *laws, body],
                       outputs=[self.normal, self.forces[s]], device=device)  # fmt: skip
-
-    def _forward_fused(self, scale: float, dt: float) -> None:
-        """`forward` on the limit points in the lab frame: the solver's one launch per pass
-        (kernels/implicit_contact.py `eval_limit_sweeps`), each pass into its own buffers."""
-        device, n, laws = self.p.device, len(self.p), implicit_laws(self.ground, scale, dt)
-        coupling = self.coupling.arrays()
-        wp.launch(limit_first_contact_kernel, dim=n, inputs=[self.p, self.u_star, *coupling, *laws, self.body],
-                  outputs=[self.response, self.normal, self.forces[0]], device=device)  # fmt: skip
-        for s in range(1, len(self.forces)):
-            wp.launch(limit_contact_sweep_kernel, dim=n,
-                      inputs=[self.p, self.u_star, self.forces[s - 1], *coupling, self.response, *laws, self.body],
-                      outputs=[self.others[s], self.normal, self.forces[s]], device=device)  # fmt: skip
 
     def _sums(self, velocities, body, laws) -> None:
         """self.sums = the net friction Σ a f_t and the stiffness Σ a |f_t|/|y| at body velocity `body` (the sums of a
