@@ -6,7 +6,8 @@ insensitive, each AC with 8 rest shapes perturbed by seeded noise; mean speed an
 Each scene is one `wavewarp sweep` (AC × sensitive × seeds, `--batch 56`: the seeds and AC values of
 one twin form one batched run, wavewarp/batch.py) whose table is kept as
 locomotion_ensemble_<scene>_<device>.csv; `--tables` charts existing tables instead (the sweep
-tables of the same grid). Writes locomotion_ensemble_<device>.json (n, mean, standard deviation per
+tables of the same grid; a scene's several tables, such as a later sweep's added seeds from
+`--first-seed`, are joined: a table belongs to the scene its file name holds). Writes locomotion_ensemble_<device>.json (n, mean, standard deviation per
 scene, twin and AC) and .png (mean ± one standard deviation, the seeds as dots).
 """
 
@@ -31,15 +32,30 @@ AC = ("0", "0.05", "0.1", "0.15", "0.2", "0.25", "0.3")
 def run_scene(scene: str, args, device) -> list:
     """The scene's sweep over AC × sensitive × seeds on `device`'s kind; its table rows."""
     grid = {"AC": list(args.ac), "sensitive": ["true", "false"]}
-    spec = SweepSpec(scene, grid=grid, seeds=args.seeds, fixed=(f"noise={args.noise}", *args.set), quick=args.quick,
-                     device="cuda" if device.is_cuda else "cpu")  # fmt: skip
-    table = os.path.join(args.out, f"locomotion_ensemble_{scene}_{device_tag(device)}.csv")
+    spec = SweepSpec(scene, grid=grid, seeds=args.seeds, first_seed=args.first_seed, fixed=(f"noise={args.noise}", *args.set),
+                     quick=args.quick, device="cuda" if device.is_cuda else "cpu")  # fmt: skip
+    seeds = f"_seeds{args.first_seed}-{args.first_seed + args.seeds - 1}" if args.first_seed else ""
+    table = os.path.join(args.out, f"locomotion_ensemble_{scene}_{device_tag(device)}{seeds}.csv")
     return sweep_to_table(spec, table, batch=args.batch)
 
 
 def read_table(path: str) -> list:
     with open(path) as f:
         return list(csv.DictReader(f))
+
+
+def scene_tables(paths: list, scenes: list) -> list:
+    """Each scene's rows: those of every table whose file name holds the scene's name (ValueError naming a
+    scene without a table, or a table of no scene)."""
+    owners = {path: [scene for scene in scenes if scene in os.path.basename(path)] for path in paths}
+    for path, found in owners.items():
+        if len(found) != 1:
+            raise ValueError(f"--tables {path}: its file name must hold exactly one of {', '.join(scenes)}")
+    rows = {scene: [row for path in paths if owners[path] == [scene] for row in read_table(path)] for scene in scenes}
+    for scene, found in rows.items():
+        if not found:
+            raise ValueError(f"--tables: no table of {scene} (file names hold the scene's name)")
+    return [rows[scene] for scene in scenes]
 
 
 def summary(rows: list) -> list:
@@ -88,10 +104,12 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", nargs="+", default=list(SCENES))
     parser.add_argument("--ac", nargs="+", default=list(AC))
     parser.add_argument("--seeds", type=int, default=8)
+    parser.add_argument("--first-seed", type=int, default=0, help="seeds N … N+seeds-1: more seeds for an ensemble")
     parser.add_argument("--noise", type=float, default=0.01, help="rest-shape noise / R (seeded)")
     parser.add_argument("--batch", type=int, default=56, help="worlds per batched run")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="fixed for every point")
-    parser.add_argument("--tables", nargs="+", default=None, metavar="CSV", help="chart these sweep tables (one per scene)")
+    parser.add_argument("--tables", nargs="+", default=None, metavar="CSV",
+                        help="chart these sweep tables (each scene's name in its file name; several a scene are joined)")  # fmt: skip
     parser.add_argument("--device-name", default=None, help="with --tables: the GPU or CPU that computed them")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="the scenes' quick runs, 2 AC values, 2 seeds")
@@ -100,9 +118,12 @@ def main(argv=None) -> int:
         args.ac, args.seeds = ["0", "0.2"], 2
     os.makedirs(args.out, exist_ok=True)
     if args.tables is not None:
-        if len(args.tables) != len(args.scenes) or not args.device_name:
-            parser.error(f"--tables needs one table per scene ({', '.join(args.scenes)}) and --device-name")
-        tables = [read_table(path) for path in args.tables]
+        if not args.device_name:
+            parser.error("--tables needs --device-name: the GPU or CPU that computed them")
+        try:
+            tables = scene_tables(args.tables, args.scenes)
+        except ValueError as error:
+            parser.error(str(error))
         tag = tables[0][0]["device"].replace(":", "")
         described = {"device": tables[0][0]["device"], "device_name": args.device_name}
     else:
@@ -110,7 +131,8 @@ def main(argv=None) -> int:
         tables = [run_scene(scene, args, device) for scene in args.scenes]
         tag, described = device_tag(device), describe_device(device)
     scenes = {scene: summary(rows) for scene, rows in zip(args.scenes, tables)}
-    result = dict(benchmark="locomotion_ensemble", date=date.today().isoformat(), **described, seeds=args.seeds,
+    seeds = max(cell["n"] for cells in scenes.values() for cell in cells)
+    result = dict(benchmark="locomotion_ensemble", date=date.today().isoformat(), **described, seeds=seeds,
                   noise=args.noise, scenes=scenes)  # fmt: skip
     write_result(result, args.out, f"locomotion_ensemble_{tag}", chart)
     return 0

@@ -16,26 +16,63 @@ def write_table(path, rows):
         writer.writerows(rows)
 
 
-def test_tables_are_summarised_per_ac_and_twin(tmp_path):
-    """Mean and sample standard deviation over the seeds with a speed (a stopped point without one is left out)."""
-    rng = np.random.default_rng(5)
+def ensemble_rows(rng, seeds):
+    """Made-up table rows over AC × twin for `seeds`, and each cell's speeds."""
     rows, speeds = [], {}
     for ac in ("0", "0.2"):
         for sensitive in ("true", "false"):
-            values = rng.normal(float(ac), 0.1, 3)
+            values = rng.normal(float(ac), 0.1, len(seeds))
             speeds[(float(ac), sensitive == "true")] = values
             rows += [{"AC": ac, "sensitive": sensitive, "seed": s, "device": "cuda:0", "speed_R_per_T": v}
-                     for s, v in enumerate(values)]  # fmt: skip
+                     for s, v in zip(seeds, values)]  # fmt: skip
+    return rows, speeds
+
+
+def check_cells(cells, speeds):
+    """Mean and sample standard deviation of each cell against numpy's."""
+    assert len(cells) == len(speeds)
+    for cell in cells:
+        values = speeds[(cell["AC"], cell["sensitive"])]
+        assert cell["n"] == len(values)
+        assert cell["mean"] == pytest.approx(values.mean(), rel=1e-12)
+        assert cell["std"] == pytest.approx(np.std(values, ddof=1), rel=1e-12)
+
+
+def test_tables_are_summarised_per_ac_and_twin(tmp_path):
+    """Mean and sample standard deviation over the seeds with a speed (a stopped point without one is left out)."""
+    rows, speeds = ensemble_rows(np.random.default_rng(5), seeds=range(3))
     rows.append({"AC": "0.2", "sensitive": "true", "seed": 3, "device": "cuda:0", "speed_R_per_T": ""})
-    write_table(tmp_path / "sphere.csv", rows)
-    assert cli(["bench", "locomotion_ensemble", "--scenes", "sphere-walker", "--tables", str(tmp_path / "sphere.csv"),
+    write_table(tmp_path / "sphere-walker.csv", rows)
+    assert cli(["bench", "locomotion_ensemble", "--scenes", "sphere-walker", "--tables", str(tmp_path / "sphere-walker.csv"),
                 "--device-name", "test GPU", "--out", str(tmp_path)]) == 0  # fmt: skip
     result = json.loads((tmp_path / "locomotion_ensemble_cuda0.json").read_text())
     assert result["device_name"] == "test GPU" and (tmp_path / "locomotion_ensemble_cuda0.png").stat().st_size > 0
-    cells = result["scenes"]["sphere-walker"]
-    assert len(cells) == 4
-    for cell in cells:
-        values = speeds[(cell["AC"], cell["sensitive"])]
-        assert cell["n"] == 3
-        assert cell["mean"] == pytest.approx(values.mean(), rel=1e-12)
-        assert cell["std"] == pytest.approx(np.sqrt(np.sum((values - values.mean()) ** 2) / 2), rel=1e-12)
+    assert result["seeds"] == 3
+    check_cells(result["scenes"]["sphere-walker"], speeds)
+
+
+def test_a_scenes_tables_are_joined_and_told_apart_by_name(tmp_path):
+    """Seeds 0-1 and 2-4 of the sphere in two tables, the prism in a third: the sphere's cells hold all five seeds."""
+    rng = np.random.default_rng(7)
+    first, first_speeds = ensemble_rows(rng, seeds=range(2))
+    later, later_speeds = ensemble_rows(rng, seeds=range(2, 5))
+    prism, prism_speeds = ensemble_rows(rng, seeds=range(2))
+    paths = [tmp_path / "locomotion_ensemble_sphere-walker_cuda0.csv", tmp_path / "locomotion_ensemble_prism-walker_cuda0.csv",
+             tmp_path / "locomotion_ensemble_sphere-walker_cuda0_seeds2-4.csv"]  # fmt: skip
+    for path, rows in zip(paths, (first, prism, later)):
+        write_table(path, rows)
+    assert cli(["bench", "locomotion_ensemble", "--tables", *map(str, paths), "--device-name", "test GPU",
+                "--out", str(tmp_path)]) == 0  # fmt: skip
+    result = json.loads((tmp_path / "locomotion_ensemble_cuda0.json").read_text())
+    assert result["seeds"] == 5
+    check_cells(result["scenes"]["sphere-walker"], {k: np.concatenate([first_speeds[k], later_speeds[k]]) for k in first_speeds})
+    check_cells(result["scenes"]["prism-walker"], prism_speeds)
+
+
+def test_a_table_of_no_scene_is_named(tmp_path, capsys):
+    rows, _ = ensemble_rows(np.random.default_rng(1), seeds=range(2))
+    write_table(tmp_path / "walker.csv", rows)
+    with pytest.raises(SystemExit):
+        cli(["bench", "locomotion_ensemble", "--tables", str(tmp_path / "walker.csv"), "--device-name", "x",
+             "--out", str(tmp_path)])  # fmt: skip
+    assert "must hold exactly one of sphere-walker, prism-walker" in capsys.readouterr().err

@@ -26,7 +26,7 @@ from distributed import Client, KilledWorker
 from distributed.system import MEMORY_LIMIT
 
 from wavewarp.sweep import (LISTED_COLUMNS, Point, SweepSpec, batches, grid_points, local_cluster, measurement_columns,
-                            merge_kernel_cache, parse_grid, sweep)
+                            merge_kernel_cache, parse_grid, prepare_folder, sweep)
 
 QUICK_CUBE = SweepSpec("cube-waves", grid={"gamma": ["0.8", "1.0"]}, seeds=2, quick=True, device="cpu")
 
@@ -50,6 +50,20 @@ def test_grid_points_vary_the_first_parameter_slowest_and_the_seed_fastest():
     assert len(points) == 8 and points[0] == Point((("AC", "0"), ("sensitive", "true")), 0)
     assert [p.seed for p in points[:2]] == [0, 1] and points[2].values == (("AC", "0"), ("sensitive", "false"))
     assert points[-1].name == "AC=0.1_sensitive=false_seed=1"
+
+
+def test_first_seed_starts_the_seeds_and_names_another_sweep(tmp_path):
+    """Seeds N … N+K-1 at every grid point; a folder holding seeds from 0 refuses a sweep from N (and the
+    definition without first_seed is unchanged, so that older folders continue)."""
+    grid = parse_grid(["AC=0,0.1"])
+    points = grid_points(SweepSpec("starfish", grid=grid, seeds=3, first_seed=4))
+    assert [p.seed for p in points] == [4, 5, 6, 4, 5, 6] and points[0].name == "AC=0_seed=4"
+    assert "first_seed" not in SweepSpec("starfish", grid=grid, seeds=3).definition()
+    prepare_folder(SweepSpec("starfish", grid=grid, seeds=3), str(tmp_path))
+    with pytest.raises(ValueError, match="holds another sweep"):
+        prepare_folder(SweepSpec("starfish", grid=grid, seeds=3, first_seed=4), str(tmp_path))
+    with pytest.raises(ValueError, match="--first-seed must be an integer >= 0"):
+        grid_points(SweepSpec("starfish", grid=grid, first_seed=-1))
 
 
 @pytest.mark.parametrize("items, message", [(["AC"], "--grid needs NAME=v1,v2"), (["AC=0,,1"], "no empty value"),

@@ -119,8 +119,9 @@ def _scene_run(args) -> int:
 
 def _sweep(args) -> int:
     wp.config.log_level = wp.LOG_WARNING
-    spec = SweepSpec(args.scene, grid=parse_grid(args.grid), seeds=args.seeds, fixed=tuple(args.set), quick=args.quick,
-                     device=args.device, h5=args.h5, measure=args.measure, deterministic=args.deterministic)  # fmt: skip
+    spec = SweepSpec(args.scene, grid=parse_grid(args.grid), seeds=args.seeds, first_seed=args.first_seed,
+                     fixed=tuple(args.set), quick=args.quick, device=args.device, h5=args.h5, measure=args.measure,
+                     deterministic=args.deterministic)  # fmt: skip
     start = time.perf_counter()
 
     def report(message):
@@ -356,6 +357,8 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                       help="a swept parameter and its values (repeat for a grid)")  # fmt: skip
     grid.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a parameter fixed for all points")
     grid.add_argument("--seeds", type=int, default=1, help="seeds 0 … K-1 at every grid point (default 1)")
+    grid.add_argument("--first-seed", type=int, default=0, metavar="N",
+                      help="start the seeds at N (N … N+K-1): more seeds for an ensemble, in a folder of their own")  # fmt: skip
     grid.add_argument("--batch", type=int, default=1,
                       help="points per task: the worlds of one batched run for scenes that have them (the walkers, buckling, "
                       "buckling-modes), "

@@ -48,7 +48,8 @@ from .trajectory import TrajectoryWriter
 @dataclass(frozen=True)
 class SweepSpec:
     """What a sweep runs: the scene, `grid` (parameter name -> the values' text, in order), `seeds`
-    (0 … seeds-1 at every grid point), `fixed` NAME=VALUE settings for every point, `quick` (the
+    (first_seed … first_seed + seeds - 1 at every grid point: a later sweep with another first_seed adds
+    seeds to an ensemble), `fixed` NAME=VALUE settings for every point, `quick` (the
     scene's reduced run), `device` ("cpu", "cuda" or None: the worker's choice), `h5` (a trajectory
     per point), `measure`, the measurement the chart shows (None: the first that differs between
     points), and `deterministic` (bit-exact repeated runs on a GPU: wavewarp.device.set_deterministic)."""
@@ -56,6 +57,7 @@ class SweepSpec:
     scene: str
     grid: dict = field(default_factory=dict)
     seeds: int = 1
+    first_seed: int = 0
     fixed: tuple = ()
     quick: bool = False
     device: str | None = None
@@ -64,8 +66,10 @@ class SweepSpec:
     deterministic: bool = False
 
     def definition(self) -> dict:
-        """What identifies the sweep's points and results (not where they run)."""
-        return {"scene": self.scene, "grid": self.grid, "seeds": self.seeds, "fixed": list(self.fixed),
+        """What identifies the sweep's points and results (not where they run); first_seed only where it
+        is not 0, so that folders written before it existed continue."""
+        seeds = {"first_seed": self.first_seed} if self.first_seed else {}
+        return {"scene": self.scene, "grid": self.grid, "seeds": self.seeds, **seeds, "fixed": list(self.fixed),
                 "quick": self.quick, "deterministic": self.deterministic}  # fmt: skip
 
 
@@ -104,9 +108,11 @@ def grid_points(spec: SweepSpec) -> list:
     """Every (grid values, seed) of the sweep, the first grid parameter varying slowest, seeds fastest."""
     if int(spec.seeds) < 1:
         raise ValueError(f"--seeds must be an integer >= 1, got {spec.seeds!r}")
-    names = list(spec.grid)
+    if int(spec.first_seed) < 0:
+        raise ValueError(f"--first-seed must be an integer >= 0, got {spec.first_seed!r}")
+    names, seeds = list(spec.grid), range(int(spec.first_seed), int(spec.first_seed) + int(spec.seeds))
     return [Point(tuple(zip(names, values)), seed)
-            for values in itertools.product(*(spec.grid[n] for n in names)) for seed in range(int(spec.seeds))]  # fmt: skip
+            for values in itertools.product(*(spec.grid[n] for n in names)) for seed in seeds]  # fmt: skip
 
 
 def check_points(spec: SweepSpec, points) -> None:
