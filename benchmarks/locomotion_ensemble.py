@@ -4,11 +4,13 @@ insensitive, each AC with 8 rest shapes perturbed by seeded noise; mean speed an
     wavewarp bench locomotion_ensemble --device cuda --out benchmarks/results
 
 Each scene is one `wavewarp sweep` (AC × sensitive × seeds, `--batch 56`: the seeds and AC values of
-one twin form one batched run, wavewarp/batch.py) whose table is kept as
+one twin form one batched run, wavewarp/batch.py) in OUT/sweeps/locomotion_ensemble_<scene>_<device>
+(the same command after a kill computes only the missing points) whose table is kept as
 locomotion_ensemble_<scene>_<device>.csv; `--tables` charts existing tables instead (the sweep
 tables of the same grid; a scene's several tables, such as a later sweep's added seeds from
-`--first-seed`, are joined: a table belongs to the scene its file name holds). Writes locomotion_ensemble_<device>.json (n, mean, standard deviation per
-scene, twin and AC) and .png (mean ± one standard deviation, the seeds as dots).
+`--first-seed`, are joined: a table belongs to the scene its file name holds). Writes
+locomotion_ensemble_<device>.json (n, mean, standard deviation per scene, twin and AC) and .png
+(mean ± one standard deviation, the seeds as dots).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import shutil
 import sys
 from datetime import date
 
@@ -23,20 +26,24 @@ import numpy as np
 
 from wavewarp.device import describe_device, device_tag, resolve_device
 from wavewarp.io import write_png, write_result
-from wavewarp.sweep import SweepSpec, sweep_to_table
+from wavewarp.sweep import SweepSpec, sweep
 
 SCENES = ("sphere-walker", "prism-walker")
 AC = ("0", "0.05", "0.1", "0.15", "0.2", "0.25", "0.3")
 
 
 def run_scene(scene: str, args, device) -> list:
-    """The scene's sweep over AC × sensitive × seeds on `device`'s kind; its table rows."""
+    """The scene's sweep over AC × sensitive × seeds on `device`'s kind, in OUT/sweeps/NAME (a re-run after a
+    kill computes only the points without a result), its table kept as OUT/NAME.csv; the table's rows."""
     grid = {"AC": list(args.ac), "sensitive": ["true", "false"]}
     spec = SweepSpec(scene, grid=grid, seeds=args.seeds, first_seed=args.first_seed, fixed=(f"noise={args.noise}", *args.set),
                      quick=args.quick, device="cuda" if device.is_cuda else "cpu")  # fmt: skip
     seeds = f"_seeds{args.first_seed}-{args.first_seed + args.seeds - 1}" if args.first_seed else ""
-    table = os.path.join(args.out, f"locomotion_ensemble_{scene}_{device_tag(device)}{seeds}.csv")
-    return sweep_to_table(spec, table, batch=args.batch)
+    name = f"locomotion_ensemble_{scene}_{device_tag(device)}{seeds}"
+    folder = os.path.join(args.out, "sweeps", name)
+    rows = sweep(spec, folder, batch=args.batch, progress=sys.stderr.isatty(), report=lambda line: print(f"{scene}: {line}"))
+    shutil.copy(os.path.join(folder, "table.csv"), os.path.join(args.out, f"{name}.csv"))
+    return rows
 
 
 def read_table(path: str) -> list:

@@ -2,10 +2,12 @@
 
 import csv
 import json
+import os
 
 import numpy as np
 import pytest
 
+from wavewarp.benchmarks import locomotion_ensemble
 from wavewarp.cli import main as cli
 
 
@@ -76,3 +78,26 @@ def test_a_table_of_no_scene_is_named(tmp_path, capsys):
         cli(["bench", "locomotion_ensemble", "--tables", str(tmp_path / "walker.csv"), "--device-name", "x",
              "--out", str(tmp_path)])  # fmt: skip
     assert "must hold exactly one of sphere-walker, prism-walker" in capsys.readouterr().err
+
+
+def test_the_sweeps_stay_in_the_output_folder_so_a_rerun_resumes(tmp_path, monkeypatch):
+    """Each scene's sweep runs in OUT/sweeps/NAME, kept (a killed bench re-run computes only the missing points,
+    tests/test_sweep.py), and the later seeds of `--first-seed` in a folder of their own."""
+    calls = []
+
+    def fake_sweep(spec, folder, **options):
+        calls.append((spec, folder))
+        rows, _ = ensemble_rows(np.random.default_rng(len(calls)), seeds=range(spec.first_seed, spec.first_seed + spec.seeds))
+        os.makedirs(folder, exist_ok=True)
+        write_table(os.path.join(folder, "table.csv"), rows)
+        return rows
+
+    monkeypatch.setattr(locomotion_ensemble, "sweep", fake_sweep)
+    common = ["bench", "locomotion_ensemble", "--device", "cpu", "--scenes", "sphere-walker", "--ac", "0", "0.2",
+              "--seeds", "2", "--out", str(tmp_path)]  # fmt: skip
+    assert cli(common) == 0 and cli(common + ["--first-seed", "2"]) == 0
+    assert [folder for _, folder in calls] == [str(tmp_path / "sweeps" / "locomotion_ensemble_sphere-walker_cpu"),
+                                               str(tmp_path / "sweeps" / "locomotion_ensemble_sphere-walker_cpu_seeds2-3")]  # fmt: skip
+    assert calls[1][0].first_seed == 2 and calls[1][0].seeds == 2
+    assert (tmp_path / "locomotion_ensemble_sphere-walker_cpu.csv").is_file()
+    assert (tmp_path / "locomotion_ensemble_sphere-walker_cpu_seeds2-3.csv").is_file()

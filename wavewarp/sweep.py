@@ -387,16 +387,3 @@ def workers_died(died: list, out: str) -> RuntimeError:
         "Dask's memory monitor (at 95% of the worker's memory limit) or crashed in native code. Every other point is "
         f"kept in {os.path.join(out, 'points')}: run the same sweep again to compute only the rest, with a smaller "
         "--batch (fewer worlds per run) or fewer workers per machine")
-
-
-def sweep_to_table(spec: SweepSpec, table: str, *, batch: int = 1, progress: bool = True,
-                   executor: concurrent.futures.Executor | None = None) -> list:  # fmt: skip
-    """`sweep` of `spec` (on `executor`, as `sweep`) in a temporary folder (removed at the end), keeping only
-    its table, copied to `table`; returns the table's rows."""
-    out = tempfile.mkdtemp(prefix=f"wavewarp-{spec.scene}-")
-    try:
-        rows = sweep(spec, out, batch=batch, progress=progress, executor=executor)
-        shutil.copy(os.path.join(out, "table.csv"), table)
-    finally:
-        shutil.rmtree(out, ignore_errors=True)
-    return rows
