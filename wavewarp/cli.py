@@ -356,7 +356,7 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grid.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
                       help="a swept parameter and its values (repeat for a grid)")  # fmt: skip
     grid.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="a parameter fixed for all points")
-    grid.add_argument("--seeds", type=int, default=1, help="seeds 0 … K-1 at every grid point (default 1)")
+    grid.add_argument("--seeds", type=int, default=1, help="K seeds at every grid point: 0 … K-1, or from --first-seed (default 1)")
     grid.add_argument("--first-seed", type=int, default=0, metavar="N",
                       help="start the seeds at N (N … N+K-1): more seeds for an ensemble, in a folder of their own")  # fmt: skip
     grid.add_argument("--batch", type=int, default=1,
