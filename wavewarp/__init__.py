@@ -12,6 +12,7 @@ from .mesh import Mesh, cube, icosphere, load, prism, save
 from .model import Model, ModelBuilder
 from .modes import azimuthal_order, softest_modes
 from .relax import RelaxationError
+from .resting_ground import RestingGround
 from .self_contact import SelfContact
 from .shell import BilayerReference, KoiterReference, Shell
 from .state import State
@@ -20,8 +21,8 @@ from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, Tim
 __all__ = [
     "BilayerReference", "BlowUpError", "FitzHughNagumo", "FitzHughNagumoSolver", "Ground", "InertialSolver",
     "KoiterReference", "LaplaceBeltrami", "LimitSurface", "Mesh", "Model", "ModelBuilder", "OscillationError",
-    "OverdampedDynamics", "OverdampedSolver", "QuasiStatic", "RelaxationError", "SelfContact", "Shell", "ShellDynamics",
-    "State", "Telegraph", "TelegraphSolver", "TimeStepError", "Walking",
+    "OverdampedDynamics", "OverdampedSolver", "QuasiStatic", "RelaxationError", "RestingGround", "SelfContact", "Shell",
+    "ShellDynamics", "State", "Telegraph", "TelegraphSolver", "TimeStepError", "Walking",
     "azimuthal_order", "cube", "gaussian_pulse", "icosphere", "limit_positions", "limit_surface", "load", "prism",
     "sample_points", "save", "simulate", "softest_modes", "steady_front", "__version__",
 ]  # fmt: skip

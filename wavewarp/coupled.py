@@ -119,6 +119,8 @@ class QuasiStatic:
     def _equilibrate(self, initial: bool = False, start=None) -> None:
         x, shell = self.state.x, self.shell
         shell.update_reference(self.state.c)
+        for term in shell.terms:  # a load step starts where the last equilibrium left the shell (RestingGround)
+            term.begin_step(x)
         running = np.array([w not in self.stopped for w in range(self.worlds)])
         failed = []
         try:

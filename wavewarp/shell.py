@@ -205,6 +205,7 @@ class Shell:
         self._newton = None  # the Newton finish's Hessian pattern and buffers (wavewarp/newton.py), on first use
         self.newton_steps = 0  # Newton steps of the last relaxation
         self._self_contact = None  # a SelfContact term (wavewarp/self_contact.py), when the scene needs one
+        self._terms = ()  # further energy terms of a relaxation (wavewarp/resting_ground.py)
 
     @property
     def worlds(self) -> int:
@@ -216,7 +217,7 @@ class Shell:
 
     def twin(self, dtype: str):
         """The same shell (terms, options, V̄) in another dtype on the same device: the Newton finish of a
-        float32 shell works on its float64 twin. Self-contact is not copied."""
+        float32 shell works on its float64 twin. Self-contact and `terms` are not copied."""
         twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
                      bilayer_radius=self._bilayer_radius, staged_block=self.staged_block,
@@ -277,6 +278,24 @@ class Shell:
         self._self_contact = term
         self.notify_model_changed()  # captured loops hold the old set of terms
 
+    @property
+    def terms(self) -> tuple:
+        """Further energy terms, built for this shell, each adding its forces and energy density with
+        `add_forces(x, forces, energy_density)` and told by `begin_step(x)` where each of QuasiStatic's load
+        steps starts (wavewarp.RestingGround); () by default."""
+        return self._terms
+
+    @terms.setter
+    def terms(self, terms) -> None:
+        terms = tuple(terms)
+        for term in terms:
+            if getattr(term, "shell", None) is not self or not all(callable(getattr(term, name, None))
+                                                                   for name in ("add_forces", "begin_step")):
+                raise ValueError(f"each of the shell's terms must be built for this shell (such as "
+                                 f"RestingGround(shell, ...)), got {type(term).__name__}")  # fmt: skip
+        self._terms = terms
+        self.notify_model_changed()
+
     # ---------------------------------------------------------------- device-level API
     def _s(self, value) -> object:
         return self.scalar(value)
@@ -336,6 +355,8 @@ class Shell:
                   outputs=[self._energy_density], device=self.device)  # fmt: skip
         if self.self_contact is not None:
             self.self_contact.add_forces(x, None, self._energy_density)
+        for term in self._terms:
+            term.add_forces(x, None, self._energy_density)
         self._sum(self._energy_density, energy, differentiable=True)
         if self.has_volume:
             self._launch_volume(x, differentiable=self.worlds == 1)  # the autodiff path has one world
@@ -421,6 +442,8 @@ class Shell:
                       outputs=[forces], device=self.device)  # fmt: skip
         if contact and self.self_contact is not None:
             self.self_contact.add_forces(x, forces, None if energy is None else self._energy_density)
+        for term in self._terms if contact else ():
+            term.add_forces(x, forces, None if energy is None else self._energy_density)
         if energy is not None:
             self._sum(self._energy_density, energy, differentiable=False)
             if with_volume:
