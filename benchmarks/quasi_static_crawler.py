@@ -8,10 +8,11 @@ Each twin (sensitive, insensitive) is one `QuasiStatic` run of the scene's shell
 `RestingGround`: the scene's ground as the area law (k per rest area a = the mean rest area per control point),
 its gravity and Coulomb friction μ, one relaxation per chemistry step from where the last one left the shell,
 its loads and anchors those of the last equilibrium (float64: the crawl's forces are far below float32's
-relaxation floor). The shell is put down by the first relaxation. Measured as the scenes' runs are
+relaxation floor); a relaxation that spends its CG budget is kept where it stopped and counted
+(`unconverged_relaxations`, QuasiStatic's overdamped update). The shell is put down by the first relaxation. Measured as the scenes' runs are
 (`wavewarp.measurements.locomotion`: the period, the speed along the wave in R per period, each pulse's
-displacement). Writes quasi_static_crawler_<scene>_<device>.json and .png (the centre's forward displacement
-against t/T, both twins).
+displacement; `BodyRotation`: the rolling angle, every chemistry step). Writes quasi_static_crawler_<scene>_<device>.json and .png (the centre's forward displacement
+against t/T, both twins), after each twin.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from wavewarp.figures import locomotion_png
 from wavewarp.initial import gaussian_pulse
 from wavewarp.io import write_result
 from wavewarp.laplace import LaplaceBeltrami
-from wavewarp.measurements import locomotion
+from wavewarp.measurements import BodyRotation, locomotion
 from wavewarp.parameters import load_scene, resolve
 from wavewarp.runs import mean_edge
 from wavewarp.walker import AUTO_DT_SAFETY, place_walker, walker_model
@@ -59,7 +60,7 @@ def crawler(scene: str, p, device, smoothing: float, tol: float):
     t_end = p.periods * fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
     dt = p.dt or min(AUTO_DT_SAFETY * model.wave(operator, c0=c0).stable_dt, t_end / p.frames)
     wave = model.wave(operator, c0=c0, dt=dt)
-    coupled = QuasiStatic(shell, wave, sensitive=p.sensitive, x0=x0, method="ncg", tol=tol)
+    coupled = QuasiStatic(shell, wave, sensitive=p.sensitive, x0=x0, method="ncg", tol=tol, overdamped=True)
     masses = p.density * LaplaceBeltrami(placed.mesh, rule=shell.rule, device="cpu", dtype="float64").mass()
     return coupled, placed, masses, options
 
@@ -70,9 +71,11 @@ def run_twin(scene: str, p, device, smoothing: float, tol: float, report=print) 
     start = time.perf_counter()
     coupled, placed, masses, options = crawler(scene, p, device, smoothing, tol)
     wave, v = coupled.wave, placed.origin_vertex
+    rotation = BodyRotation(masses)
 
     def row():
         x = coupled.positions()
+        rotation.record(x)
         return [wave.time, float(wave.c.numpy()[v]), *(masses @ x / masses.sum()), *x[v]]
 
     trace = [row()]
@@ -89,7 +92,7 @@ def run_twin(scene: str, p, device, smoothing: float, tol: float, report=print) 
                           fhn_kinetic_period(p.nu, p.kappa, p.epsilon))  # fmt: skip
     return {"sensitive": p.sensitive, "trace": trace, "forward": placed.forward, "radius": options["radius"],
             "chemistry_dt": wave.dt, "chemistry_steps": steps, **coupled.counters(),
-            "wall_time_s": time.perf_counter() - start, **measured}  # fmt: skip
+            "wall_time_s": time.perf_counter() - start, **measured, **rotation.measurements(placed.forward)}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -108,18 +111,19 @@ def main(argv=None) -> int:
     module = load_scene(args.scene)
     overrides = [*args.set] + ([f"periods={args.periods}"] if args.periods else [])
     base = resolve(module.Parameters, module.QUICK if args.quick else None, [*overrides, "dtype=float64"])
-    twins = [run_twin(args.scene, replace(base, sensitive=sensitive), device, args.smoothing, args.tol)
-             for sensitive in (True, False)]  # fmt: skip
-    runs = [{k: v for k, v in twin.items() if k not in ("trace", "forward")} for twin in twins]
-    result = dict(benchmark="quasi_static_crawler", date=date.today().isoformat(), **describe_device(device),
-                  scene=args.scene, quick=args.quick, settings=list(args.set), smoothing=args.smoothing, tol=args.tol,
-                  twins=runs)  # fmt: skip
+    twins = []
 
     def chart(result, path):
         locomotion_png([(args.scene, t["sensitive"], t["trace"], t["forward"], t["radius"]) for t in twins], path,
                        title=f"{args.scene}, quasi-static crawler (ζ → 0), {result['device_name']}")  # fmt: skip
 
-    write_result(result, args.out, f"quasi_static_crawler_{args.scene}_{device_tag(device)}", chart)
+    for sensitive in (True, False):  # written after each twin: a killed run keeps the finished one
+        twins.append(run_twin(args.scene, replace(base, sensitive=sensitive), device, args.smoothing, args.tol))
+        runs = [{k: v for k, v in twin.items() if k not in ("trace", "forward")} for twin in twins]
+        result = dict(benchmark="quasi_static_crawler", date=date.today().isoformat(), **describe_device(device),
+                      scene=args.scene, quick=args.quick, settings=list(args.set), smoothing=args.smoothing,
+                      tol=args.tol, twins=runs)  # fmt: skip
+        write_result(result, args.out, f"quasi_static_crawler_{args.scene}_{device_tag(device)}", chart)
     return 0
 
 

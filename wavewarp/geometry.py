@@ -14,7 +14,9 @@ import scipy.sparse as sp
 import warp as wp
 
 from .device import mat22, numpy_dtype, resolve_device, resolve_dtype, vec3, vec6
+from .kernels.contact import quadrature_spread_kernel
 from .kernels.limit_surface import limit_positions_kernel, limit_surface_kernel
+from .kernels.self_contact import quadrature_gather_kernel
 from .mesh import Mesh
 from .patches import PatchTables, build_patch_tables
 from .subdivision import limit_weight, patch_basis
@@ -241,6 +243,20 @@ def sample_points(mesh: Mesh, triangle, parameters, x=None) -> np.ndarray:
         rings = host.patch_vertices[starts[:, None] + np.arange(basis.shape[1])]
         out[members] = np.einsum("pk,pkd->pd", basis, x[rings])
     return out
+
+
+def spread_to_control_points(tables: SurfaceTables, pressures: wp.array, area: wp.array, forces: wp.array,
+                             deterministic: bool) -> None:
+    """forces_I += Σ_q N_I(q) f_q w_q: a force per rest area at the quadrature points (`pressures`, rest areas
+    `area`) on the control points — atomically, or gathered in a fixed order where `deterministic`. Capturable."""
+    if deterministic:
+        wp.launch(quadrature_gather_kernel, dim=len(forces),
+                  inputs=[pressures, area, *tables.vertex_entries(), tables.patch_start, tables.triangle_type,
+                          tables.basis, tables.points_per_triangle],
+                  outputs=[forces], device=tables.device)  # fmt: skip
+    else:
+        wp.launch(quadrature_spread_kernel, dim=tables.n_quadrature_points, inputs=[pressures, area, *tables.patch()],
+                  outputs=[forces], device=tables.device)  # fmt: skip
 
 
 def evaluate(tables: SurfaceTables, x: wp.array, out: dict | None = None) -> dict:

@@ -16,15 +16,13 @@ import numpy as np
 import warp as wp
 
 from .checks import positive
-from .geometry import evaluate
+from .geometry import evaluate, spread_to_control_points
 from .kernels import contact as kernels_contact
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import resting_ground as kernels_resting_ground
 from .kernels import self_contact as kernels_self_contact
-from .kernels.contact import quadrature_spread_kernel
 from .kernels.limit_surface import quadrature_points_kernel
 from .kernels.resting_ground import ground_pressure_kernel, resting_ground_kernel
-from .kernels.self_contact import quadrature_gather_kernel
 
 
 class RestingGround:
@@ -84,16 +82,8 @@ class RestingGround:
                           int(energy_density is not None)],
                   outputs=[self.pressures, shell._energy_density if energy_density is None else energy_density],
                   device=shell.device)  # fmt: skip
-        if forces is None:
-            return
-        if shell.deterministic:
-            wp.launch(quadrature_gather_kernel, dim=shell.mesh.n_vertices,
-                      inputs=[self.pressures, self.area, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis,
-                              t.points_per_triangle],
-                      outputs=[forces], device=shell.device)  # fmt: skip
-        else:
-            wp.launch(quadrature_spread_kernel, dim=t.n_quadrature_points, inputs=[self.pressures, self.area, *t.patch()],
-                      outputs=[forces], device=shell.device)  # fmt: skip
+        if forces is not None:
+            spread_to_control_points(t, self.pressures, self.area, forces, shell.deterministic)
 
     def normal_force(self, x: wp.array) -> np.ndarray:
         """Each world's total ground force Σ_q k z_q² w_q at positions x (host; one value per world)."""

@@ -19,12 +19,10 @@ import numpy as np
 import warp as wp
 
 from .checks import positive
-from .geometry import evaluate
-from .kernels.contact import quadrature_spread_kernel
+from .geometry import evaluate, spread_to_control_points
 from .kernels.limit_surface import quadrature_points_kernel
 from .kernels.self_contact import (
     moved_kernel,
-    quadrature_gather_kernel,
     self_contact_candidates_kernel,
     self_contact_pressure_kernel,
 )
@@ -120,17 +118,8 @@ class SelfContact:
                           int(energy_density is not None)],
                   outputs=[self.pressures, shell._energy_density if energy_density is None else energy_density],
                   device=shell.device)  # fmt: skip
-        if forces is None:
-            return
-        if shell.deterministic:
-            wp.launch(quadrature_gather_kernel, dim=shell.mesh.n_vertices,
-                      inputs=[self.pressures, self.area, *t.vertex_entries(), t.patch_start, t.triangle_type, t.basis,
-                              t.points_per_triangle],
-                      outputs=[forces], device=shell.device)  # fmt: skip
-        else:
-            patch = t.patch()
-            wp.launch(quadrature_spread_kernel, dim=n_q, inputs=[self.pressures, self.area, *patch], outputs=[forces],
-                      device=shell.device)  # fmt: skip
+        if forces is not None:
+            spread_to_control_points(t, self.pressures, self.area, forces, shell.deterministic)
 
     def pairs(self) -> int:
         """Candidate pairs (each counted from both ends) at the last search."""
