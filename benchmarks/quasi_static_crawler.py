@@ -11,7 +11,9 @@ its loads and anchors those of the last equilibrium (float64: the crawl's forces
 relaxation floor); a relaxation that spends its CG budget is kept where it stopped and counted
 (`unconverged_relaxations`, QuasiStatic's overdamped update). The shell is put down by the first relaxation. Measured as the scenes' runs are
 (`wavewarp.measurements.locomotion`: the period, the speed along the wave in R per period, each pulse's
-displacement; `BodyRotation`: the rolling angle, every chemistry step). Writes quasi_static_crawler_<scene>_<device>.json and .png (the centre's forward displacement
+displacement; `BodyRotation`: the rolling angle, every chemistry step) and by its snaps: the steps in which a
+control point moved more than SNAP R (a jump between equilibria, whose path the quasi-static limit does not
+define) and the largest move in one step. Writes quasi_static_crawler_<scene>_<device>.json and .png (the centre's forward displacement
 against t/T, both twins), after each twin.
 """
 
@@ -39,6 +41,7 @@ from wavewarp.runs import mean_edge
 from wavewarp.walker import AUTO_DT_SAFETY, place_walker, walker_model
 
 SCENES = ("sphere-walker", "prism-walker", "cube-walker")
+SNAP = 0.05  # a chemistry step that moves a control point farther than this (in R) is counted as a snap
 
 
 def crawler(scene: str, p, device, smoothing: float, tol: float):
@@ -71,11 +74,13 @@ def run_twin(scene: str, p, device, smoothing: float, tol: float, report=print) 
     start = time.perf_counter()
     coupled, placed, masses, options = crawler(scene, p, device, smoothing, tol)
     wave, v = coupled.wave, placed.origin_vertex
-    rotation = BodyRotation(masses)
+    rotation, moves, last = BodyRotation(masses), [], [coupled.positions()]
 
     def row():
         x = coupled.positions()
         rotation.record(x)
+        moves.append(float(np.abs(x - last[0]).max()) / options["radius"])
+        last[0] = x
         return [wave.time, float(wave.c.numpy()[v]), *(masses @ x / masses.sum()), *x[v]]
 
     trace = [row()]
@@ -92,6 +97,7 @@ def run_twin(scene: str, p, device, smoothing: float, tol: float, report=print) 
                           fhn_kinetic_period(p.nu, p.kappa, p.epsilon))  # fmt: skip
     return {"sensitive": p.sensitive, "trace": trace, "forward": placed.forward, "radius": options["radius"],
             "chemistry_dt": wave.dt, "chemistry_steps": steps, **coupled.counters(),
+            "largest_step_move_R": max(moves), "snaps": sum(move > SNAP for move in moves),
             "wall_time_s": time.perf_counter() - start, **measured, **rotation.measurements(placed.forward)}  # fmt: skip
 
 

@@ -18,5 +18,6 @@ def test_a_quick_crawl_relaxes_once_a_chemistry_step_and_stays_on_the_waves_axis
     for twin in result["twins"]:
         assert twin["relaxations"] == twin["chemistry_steps"] + 1  # the put-down, then one a step
         assert twin["unconverged_relaxations"] == 0
+        assert twin["largest_step_move_R"] > 0 and (twin["snaps"] > 0) == (twin["largest_step_move_R"] > 0.05)
         forward, lateral = twin["displacement"][0], twin["displacement"][1]
         assert np.isfinite(forward) and abs(lateral) <= 1e-3 * abs(forward)  # mirror symmetry in y (to the tolerance)
