@@ -15,7 +15,7 @@ import warp as wp
 
 from .device import mat22, numpy_dtype, resolve_device, resolve_dtype, vec3, vec6
 from .kernels.contact import quadrature_spread_kernel
-from .kernels.limit_surface import limit_positions_kernel, limit_surface_kernel
+from .kernels.limit_surface import limit_positions_kernel, limit_surface_kernel, quadrature_points_kernel
 from .kernels.self_contact import quadrature_gather_kernel
 from .mesh import Mesh
 from .patches import PatchTables, build_patch_tables
@@ -245,7 +245,13 @@ def sample_points(mesh: Mesh, triangle, parameters, x=None) -> np.ndarray:
     return out
 
 
-def spread_to_control_points(tables: SurfaceTables, pressures: wp.array, area: wp.array, forces: wp.array,
+def quadrature_points(tables: SurfaceTables, x: wp.array, out: wp.array) -> None:
+    """out_q = Σ N_I(q) x_I: the limit surface at every quadrature point (values only). Capturable."""
+    wp.launch(quadrature_points_kernel, dim=tables.n_quadrature_points, inputs=[x, *tables.patch()], outputs=[out],
+              device=tables.device)  # fmt: skip
+
+
+def spread_quadrature_forces(tables: SurfaceTables, pressures: wp.array, area: wp.array, forces: wp.array,
                              deterministic: bool) -> None:
     """forces_I += Σ_q N_I(q) f_q w_q: a force per rest area at the quadrature points (`pressures`, rest areas
     `area`) on the control points — atomically, or gathered in a fixed order where `deterministic`. Capturable."""

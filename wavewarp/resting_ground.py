@@ -16,12 +16,11 @@ import numpy as np
 import warp as wp
 
 from .checks import positive
-from .geometry import evaluate, spread_to_control_points
+from .geometry import evaluate, quadrature_points, spread_quadrature_forces
 from .kernels import contact as kernels_contact
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import resting_ground as kernels_resting_ground
 from .kernels import self_contact as kernels_self_contact
-from .kernels.limit_surface import quadrature_points_kernel
 from .kernels.resting_ground import ground_pressure_kernel, resting_ground_kernel
 
 
@@ -60,9 +59,7 @@ class RestingGround:
             self.anchors, self.loads = wp.zeros(n_q, dtype=shell.vec3), wp.zeros(n_q, dtype=shell.scalar)
 
     def _points(self, x: wp.array) -> None:
-        t = self.shell.tables
-        wp.launch(quadrature_points_kernel, dim=t.n_quadrature_points, inputs=[x, *t.patch()], outputs=[self.points],
-                  device=self.shell.device)  # fmt: skip
+        quadrature_points(self.shell.tables, x, self.points)
 
     def begin_step(self, x: wp.array) -> None:
         """A load step starts at positions x (`QuasiStatic` calls it before each relaxation): every point's anchor
@@ -83,7 +80,7 @@ class RestingGround:
                   outputs=[self.pressures, shell._energy_density if energy_density is None else energy_density],
                   device=shell.device)  # fmt: skip
         if forces is not None:
-            spread_to_control_points(t, self.pressures, self.area, forces, shell.deterministic)
+            spread_quadrature_forces(t, self.pressures, self.area, forces, shell.deterministic)
 
     def normal_force(self, x: wp.array) -> np.ndarray:
         """Each world's total ground force Σ_q k z_q² w_q at positions x (host; one value per world)."""

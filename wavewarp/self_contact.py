@@ -19,8 +19,7 @@ import numpy as np
 import warp as wp
 
 from .checks import positive
-from .geometry import evaluate, spread_to_control_points
-from .kernels.limit_surface import quadrature_points_kernel
+from .geometry import evaluate, quadrature_points, spread_quadrature_forces
 from .kernels.self_contact import (
     moved_kernel,
     self_contact_candidates_kernel,
@@ -76,16 +75,10 @@ class SelfContact:
             self.grid = wp.HashGrid(GRID_CELLS, GRID_CELLS, GRID_CELLS, dtype=shell.scalar)
         self.searches = 0  # candidate searches so far
 
-    def _points(self, x: wp.array, out: wp.array) -> None:
-        t = self.shell.tables
-        wp.launch(quadrature_points_kernel, dim=t.n_quadrature_points,
-                  inputs=[x, *t.patch()],
-                  outputs=[out], device=self.shell.device)  # fmt: skip
-
     def search(self, x: wp.array) -> None:
         """Candidate pairs at positions x (one host read: a row that overflowed grows the table)."""
         s = self.shell.scalar
-        self._points(x, self.built)
+        quadrature_points(self.shell.tables, x, self.built)
         self.grid.build(self.built, self.radius)
         while True:
             wp.launch(self_contact_candidates_kernel, dim=len(self.built),
@@ -112,14 +105,14 @@ class SelfContact:
         of E (when given). Device only (capturable)."""
         shell, t, s = self.shell, self.shell.tables, self.shell.scalar
         n_q = t.n_quadrature_points
-        self._points(x, self.points)
+        quadrature_points(t, x, self.points)
         wp.launch(self_contact_pressure_kernel, dim=n_q,
                   inputs=[self.points, self.area, self.neighbours, self.counts, s(self.distance), s(self.strength),
                           int(energy_density is not None)],
                   outputs=[self.pressures, shell._energy_density if energy_density is None else energy_density],
                   device=shell.device)  # fmt: skip
         if forces is not None:
-            spread_to_control_points(t, self.pressures, self.area, forces, shell.deterministic)
+            spread_quadrature_forces(t, self.pressures, self.area, forces, shell.deterministic)
 
     def pairs(self) -> int:
         """Candidate pairs (each counted from both ends) at the last search."""
