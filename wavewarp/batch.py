@@ -52,19 +52,31 @@ def check_batch(ps: list) -> None:
 class WorldsRun(WaveClock):
     """What a batched run's frames share: `run` steps every world frame by frame and reports each; the
     run provides `frames`, `stopped` (world -> error), `resolved` (per world), `advance_frame()`,
-    `_record(writers, stopped_after)` and `measurements(w, time)`."""
+    `_record(writers, stopped_after)` and `measurements(w, time)`; a run that can be resumed also
+    `replay_frame(time, frames)` and `restore(time, frames)`."""
 
-    def run(self, progress=None, writers=None) -> list:
+    @property
+    def resumable(self) -> bool:
+        return hasattr(self, "restore")
+
+    def run(self, progress=None, writers=None, replay=None) -> list:
         """Every frame (`progress(frames done)` after each); `writers`, one trajectory writer per world
-        (wavewarp/trajectory.py; entered here), take each world's frames until it stops. Returns one result
-        per world: status ("done", or "stopped" with its error), the frames it completed (the first
-        included), its measurements (a stopped world's at its stop) and resolved parameters."""
+        (wavewarp/trajectory.py; entered here), take each world's frames until it stops. `replay`: per world,
+        the (time, frame) pairs its trajectory holds (as many for every world, the writers resumed after
+        them): replayed into the measurements, and the run goes on from the last. Returns one result per
+        world: status ("done", or "stopped" with its error), the frames it completed (the first included),
+        its measurements (a stopped world's at its stop) and resolved parameters."""
         stopped_after, stop_times = {}, {}  # world -> the frames it completed before it stopped; its time then
         with contextlib.ExitStack() as stack:
             for writer in writers or ():
                 stack.enter_context(writer)
-            self._record(writers, stopped_after)
-            for frame in range(self.frames):
+            if replay:
+                for stored in zip(*replay):  # one stored frame of every world
+                    self.replay_frame(stored[0][0], [frame for _, frame in stored])
+                self.restore(replay[0][-1][0], [frames[-1][1] for frames in replay])
+            else:
+                self._record(writers, stopped_after)
+            for frame in range(len(replay[0]) - 1 if replay else 0, self.frames):
                 try:
                     self.advance_frame()
                 except FAILURES:  # every world has stopped
@@ -205,6 +217,34 @@ class WalkerBatch(WorldsRun):
                  "reaction_amount": np.array(float(np.sum(produced[s].astype(np.float64)))),
                  "first_arrival": arrival[s], "trace": self._frame_traces[w]}
                 for w, s in enumerate(self._slices)]  # fmt: skip
+
+    def replay_frame(self, time: float, frames: list) -> None:
+        """Every world's stored frame at `time` (a resumed batch) into the balance, the rotation and the
+        traces, as `record` and `advance_frame` took it when it was written."""
+        positions = np.concatenate([frame["positions"] for frame in frames])
+        produced = np.array([float(frame["reaction_amount"]) for frame in frames])
+        self.balance.record(time, positions, np.concatenate([frame["concentration"] for frame in frames]),
+                            self.initial_totals + produced)  # fmt: skip
+        self.rotation.record(positions)
+        for w, frame in enumerate(frames):
+            rows = np.asarray(frame["trace"], dtype=np.float64)
+            self.traces[w] = np.concatenate([self.traces[w], rows[rows[:, 0] > self.traces[w][-1, 0] + 1e-9 * self.wave.dt]])
+            self._frame_traces[w] = rows
+
+    def restore(self, time: float, frames: list) -> None:
+        """Continue every world from its stored frame at `time` (as `WalkerRun.restore`)."""
+        joined = {name: np.concatenate([frame[name] for frame in frames])
+                  for name in ("positions", "velocities", "concentration", "inhibitor", "reaction_per_vertex",
+                               "first_arrival")}  # fmt: skip
+        self.coupled.state.assign_frame(joined)
+        self.wave.set_produced(0.0, joined["reaction_per_vertex"])
+        self.wave.steps = int(round(time / self.wave.dt))
+        self.wave.time = self.wave.steps * self.wave.dt
+        self.arrival.restore(joined["first_arrival"], self.wave.steps, self.wave.dt)
+        self.shell.update_reference(self.wave.c)
+        if self.ps[0].sensitive:
+            self.operator.update(self.dynamics.x)
+        wp.synchronize_device(self.shell.device)
 
     def record(self) -> None:
         """The chemical balance of every world at the current frame."""

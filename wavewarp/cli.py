@@ -370,7 +370,9 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     grid.add_argument("--scheduler", default=None, metavar="ADDRESS",
                       help="an existing Dask scheduler (tcp://host:8786) instead of a local cluster")  # fmt: skip
     grid.add_argument("--quick", action="store_true", help="the scene's reduced run at every point")
-    grid.add_argument("--h5", action="store_true", help="also keep every point's trajectory (DIR/points/*.h5)")
+    grid.add_argument("--h5", action="store_true",
+                      help="also keep every point's trajectory (DIR/points/*.h5), frame by frame: a batch killed "
+                      "part-way goes on from its last stored frame when the sweep is run again")  # fmt: skip
     grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
     _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)

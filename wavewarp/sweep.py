@@ -7,8 +7,11 @@ cluster with one worker per GPU, or per CPU core.
 
 Every point's result is written atomically to DIR/points/POINT.json as soon as it is computed,
 so a killed sweep loses only the points being computed; running the same sweep into the same
-DIR again computes only the points without a result. At the end the sweep writes DIR/table.csv
-(a row per point) and DIR/chart.png (a measurement against the grid).
+DIR again computes only the points without a result. With `h5` each point's trajectory
+(DIR/points/POINT.h5) is durable frame by frame and records the batch it ran in: the batches a
+killed sweep left part-way are run again as they were and go on from their worlds' last common
+frame. At the end the sweep writes DIR/table.csv (a row per point) and DIR/chart.png (a
+measurement against the grid).
 
 Scenes with batched worlds (`build_batch`: the walkers, wavewarp/batch.py; buckling and
 buckling-modes, wavewarp/quasistatic_batch.py) run a batch of points
@@ -31,6 +34,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field, replace
 
+import h5py
 import warp as wp
 from distributed import Client, KilledWorker, Nanny, Scheduler, SpecCluster
 from distributed.system import MEMORY_LIMIT
@@ -42,7 +46,9 @@ from .driver import FAILURES, simulate
 from .figures import sweep_chart_png
 from .io import atomic_path, write_json
 from .parameters import SceneError, fields, load_scene, resolve
-from .trajectory import TrajectoryWriter
+from .trajectory import TrajectoryWriter, complete_frames, read_frames
+
+BATCH_ATTRIBUTE = "sweep_batch"  # a point's trajectory: the names of the points of the batch it ran in (JSON)
 
 
 @dataclass(frozen=True)
@@ -138,6 +144,49 @@ def result_path(out: str, point: Point) -> str:
     return os.path.join(out, "points", f"{point.name}.json")
 
 
+def trajectory_path(out: str, point: Point) -> str:
+    return os.path.join(out, "points", f"{point.name}.h5")
+
+
+def stored_batch(path: str) -> tuple:
+    """The batch a point's trajectory ran in (its points' names) and the frames it holds; ([], 0) where
+    there is no trajectory to continue."""
+    try:
+        with h5py.File(path, "r") as f:
+            return json.loads(f.attrs.get(BATCH_ATTRIBUTE, "[]")), complete_frames(f)
+    except (OSError, KeyError, ValueError):
+        return [], 0
+
+
+def resumable_frames(out: str, points) -> int:
+    """The frames every point's trajectory holds, where each records this very batch (a killed sweep's
+    batch, to continue); 0 where any does not."""
+    names = [point.name for point in points]
+    stored = [stored_batch(trajectory_path(out, point)) for point in points]
+    return min(frames for _, frames in stored) if all(batch == names for batch, _ in stored) else 0
+
+
+def started_batches(out: str, missing) -> tuple:
+    """The batches a killed sweep left part-way (recorded in their points' trajectories, every point of
+    them still without a result), and the other points of `missing`."""
+    by_name, started, taken = {point.name: point for point in missing}, [], set()
+    for point in missing:
+        names, frames = stored_batch(trajectory_path(out, point))
+        if frames and names and point.name not in taken and all(name in by_name and name not in taken for name in names):
+            started.append([by_name[name] for name in names])
+            taken.update(names)
+    return started, [point for point in missing if point.name not in taken]
+
+
+def point_writer(out: str, points, w: int, *, mesh, series, scene: str, parameters, device: str,
+                 resume_frames: int) -> TrajectoryWriter:  # fmt: skip
+    """World w's trajectory writer: a new file, or with `resume_frames` the file continued after them."""
+    return TrajectoryWriter(trajectory_path(out, points[w]), triangles=mesh.triangles, rest_positions=mesh.vertices,
+                            series=series, scene=scene, parameters=parameters, device=device,
+                            resume=resume_frames > 0, resume_frames=resume_frames or None,
+                            attributes={BATCH_ATTRIBUTE: json.dumps([point.name for point in points])})  # fmt: skip
+
+
 def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
     """Run one point to its end and write its result (parameters, outcome, measurements) atomically.
     A solver failure is a result ("stopped", with the frames before it measured); an error while
@@ -152,12 +201,14 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
         result.update(status="failed", error=str(error), wall_time_s=time.perf_counter() - start)
         write_json(result_path(out, point), result)
         return result
-    writers = []
+    writers, frames = [], resumable_frames(out, [point]) if spec.h5 and hasattr(run, "restore") else 0
     if spec.h5:
-        writers.append(TrajectoryWriter(os.path.join(out, "points", f"{point.name}.h5"), triangles=run.mesh.triangles,
-                                        rest_positions=run.mesh.vertices, series=run.series, scene=module.NAME,
-                                        parameters=run.resolved, device=str(run.shell.device)))  # fmt: skip
-    outcome = simulate(run, writers, on_measured=writers[0].set_measurements if writers else None)
+        writers.append(point_writer(out, [point], 0, mesh=run.mesh, series=run.series, scene=module.NAME,
+                                    parameters=run.resolved, device=str(run.shell.device), resume_frames=frames))  # fmt: skip
+    if frames:
+        result["resumed_after_frames"] = frames
+    replay = read_frames(trajectory_path(out, point))[:frames] if frames else ()
+    outcome = simulate(run, writers, replay=replay, on_measured=writers[0].set_measurements if writers else None)
     if outcome.interrupted:
         raise KeyboardInterrupt
     result.update(status="stopped" if outcome.failure else "done", stopped=outcome.failure, frames=outcome.frames,
@@ -170,18 +221,23 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
 def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     """The points of one batch as the worlds of one batched run (`module.build_batch`); each point's
     result written as run_point writes it (with `--h5` its trajectory too), its wall time the batch's,
-    with `batch` {worlds, world}."""
+    with `batch` {worlds, world}. A batch whose trajectories hold its frames so far (a killed sweep's)
+    goes on from the last frame they share (`batch` then also says after how many frames)."""
     results = [{"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
                 "batch": {"worlds": len(points), "world": w}} for w, point in enumerate(points)]  # fmt: skip
     reports, start = [], time.perf_counter()
     try:
         run = module.build_batch([point_parameters(module, spec, point) for point in points],
                                  seeds=[point.seed for point in points], device=spec.device, report=reports.append)  # fmt: skip
-        writers = [TrajectoryWriter(os.path.join(out, "points", f"{point.name}.h5"), triangles=mesh.triangles,
-                                    rest_positions=mesh.vertices, series=run.series, scene=module.NAME,
-                                    parameters=parameters, device=str(run.shell.device))
-                   for point, mesh, parameters in zip(points, run.world_meshes, run.resolved)] if spec.h5 else None  # fmt: skip
-        worlds = run.run(writers=writers)
+        frames = resumable_frames(out, points) if spec.h5 and run.resumable else 0
+        replay = [read_frames(trajectory_path(out, point))[:frames] for point in points] if frames else None
+        writers = [point_writer(out, points, w, mesh=mesh, series=run.series, scene=module.NAME,
+                                parameters=parameters, device=str(run.shell.device), resume_frames=frames)
+                   for w, (mesh, parameters) in enumerate(zip(run.world_meshes, run.resolved))] if spec.h5 else None  # fmt: skip
+        if frames:
+            for result in results:
+                result["batch"]["resumed_after_frames"] = frames
+        worlds = run.run(writers=writers, replay=replay)
     except (ValueError, *FAILURES) as error:
         worlds = [{"status": "failed", "error": str(error)}] * len(points)
     else:
@@ -363,7 +419,11 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
     if missing:
         with _executor(executor, spec, workers, scheduler, report) as pool:
-            work = {pool.submit(run_batch, spec, points, out): points for points in batches(missing, batch, group)}
+            started, fresh = started_batches(out, missing) if spec.h5 else ([], missing)
+            if started:
+                report(f"{len(started)} batch(es) of a killed sweep go on from their trajectories' frames")
+            planned = started + batches(fresh, batch, group)
+            work = {pool.submit(run_batch, spec, points, out): points for points in planned}
             bar, died = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress), []
             for future in concurrent.futures.as_completed(work):
                 try:

@@ -6,7 +6,8 @@ series a scene records (`velocities` (F, V, 3), `inhibitor` (F, V); the walkers'
 (F,), the amount the reaction has added, `first_arrival` (F, V), each vertex's first-front arrival,
 and `trace` (F, k, 8): time, c at the origin, the centre of mass and the origin vertex's position at
 the k chemistry steps up to each frame);
-root attributes `scene`, `parameters` (JSON), `wavewarp_version`, `device`, and at the end of a
+root attributes `scene`, `parameters` (JSON), `wavewarp_version`, `device` (a sweep's point also
+`sweep_batch`, its batch's points), and at the end of a
 run `measurements` (JSON) plus each numeric measurement under its own name (walkers: `period`,
 `distance_R`, `speed_R_per_T`, ...).
 
@@ -40,11 +41,12 @@ class TrajectoryWriter:
     """Context manager appending frames to an HDF5 trajectory.
 
     `series` maps each per-frame dataset beyond time to its per-frame shape, e.g.
-    {"positions": (V, 3), "concentration": (V,)}.
+    {"positions": (V, 3), "concentration": (V,)}. `attributes`: further root attributes (strings).
+    `resume`: continue the file's frames; `resume_frames`: after at most this many (any beyond are cut).
     """
 
     def __init__(self, path, *, triangles, rest_positions, series: dict, scene: str, parameters: dict, device: str,
-                 resume: bool = False):  # fmt: skip
+                 resume: bool = False, resume_frames: int | None = None, attributes: dict | None = None):  # fmt: skip
         if os.path.splitext(os.fspath(path))[1] not in (".h5", ".hdf5"):
             raise ValueError(f"HDF5 output {os.fspath(path)!r} must end in .h5 or .hdf5")
         self.path = os.fspath(path)
@@ -52,8 +54,8 @@ class TrajectoryWriter:
         self.rest_positions = np.asarray(rest_positions, dtype=np.float64)
         self.series = {name: tuple(shape) for name, shape in series.items()}
         self.attributes = {"scene": scene, "parameters": json.dumps(parameters, sort_keys=True),
-                           "wavewarp_version": __version__, "device": str(device)}  # fmt: skip
-        self.resume = bool(resume)
+                           "wavewarp_version": __version__, "device": str(device), **(attributes or {})}  # fmt: skip
+        self.resume, self.resume_frames = bool(resume), resume_frames
         self.frames = 0
 
     def __enter__(self) -> TrajectoryWriter:
@@ -68,13 +70,16 @@ class TrajectoryWriter:
             try:
                 self._check_resumable()
                 self.frames = complete_frames(self.file)
-                for name in self.file["frames"]:  # a frame half-written when the process died
+                if self.resume_frames is not None:
+                    self.frames = min(self.frames, int(self.resume_frames))
+                for name in self.file["frames"]:  # a frame half-written when the process died (or cut)
                     dataset = self.file["frames"][name]
                     dataset.resize((self.frames, *dataset.shape[1:]))
+                self.file["frames"].attrs[COMPLETE] = self.frames
                 for name in set(self.series) - set(self.file["frames"]):  # a series newer than the file: NaN before
                     self._create_series(name, self.frames)
-                self.file.attrs["parameters"] = self.attributes["parameters"]
-                self.file.attrs["device"] = self.attributes["device"]
+                for key in set(self.attributes) - {"scene", "wavewarp_version"}:
+                    self.file.attrs[key] = self.attributes[key]
                 self._sync()
             except BaseException:
                 self.file.close()
