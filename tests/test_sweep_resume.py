@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from wavewarp.batch import WalkerBatch
+from wavewarp.quasistatic_batch import QuasiStaticBatch
 from wavewarp.sweep import SweepSpec, grid_points, started_batches, sweep
 from wavewarp.trajectory import TrajectoryWriter, read_frames
 from wavewarp.walker import WalkerRun
@@ -77,6 +78,28 @@ def test_a_batch_killed_midway_goes_on_from_its_worlds_trajectories(tmp_path, mo
     assert len(advanced) == 2 and [row["status"] for row in rows] == ["done", "done"]
     with open(tmp_path / "part" / "points" / f"{points[0].name}.json") as f:
         assert json.load(f)["batch"] == {"worlds": 2, "world": 0, "resumed_after_frames": 2}
+    assert_same_points(tmp_path / "full", tmp_path / "part", points)
+
+
+def test_a_quasi_static_batch_killed_midway_goes_on_with_its_relaxation_bookkeeping(tmp_path, monkeypatch):
+    """buckling-modes (the Fig. S1b sweep's scene) as a batch of 2 worlds, killed after one of its 3 frames:
+    the rerun advances the 2 frames left, and the results (mode, relaxation counts, balance) and trajectories
+    equal the uninterrupted sweep's."""
+    fixed = ("level=2", "frames=3", "t_end=1", "dtype=float64", "adaptive_dt=false", "self_contact=false",
+             "relax_iterations=300")  # fmt: skip
+    spec = SweepSpec("buckling-modes", grid={"AI": ["10.5", "13.5"]}, fixed=fixed, device="cpu", h5=True,
+                     deterministic=True)  # fmt: skip
+    points = grid_points(spec)
+    sweep(spec, str(tmp_path / "full"), executor=one_thread(), batch=2)
+    killed_after(monkeypatch, QuasiStaticBatch, 1)
+    with pytest.raises(KeyboardInterrupt):
+        sweep(spec, str(tmp_path / "part"), executor=one_thread(), batch=2)
+    advanced = killed_after(monkeypatch, QuasiStaticBatch, 100)
+    sweep(spec, str(tmp_path / "part"), executor=one_thread(), batch=2)
+    assert len(advanced) == 2
+    with open(tmp_path / "part" / "points" / f"{points[1].name}.json") as f:
+        result = json.load(f)
+    assert result["batch"]["resumed_after_frames"] == 2 and result["measurements"]["relax_iterations_mean"] > 0
     assert_same_points(tmp_path / "full", tmp_path / "part", points)
 
 

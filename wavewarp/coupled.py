@@ -183,11 +183,11 @@ class QuasiStatic:
         unconverged, Newton-finished and round-off relaxations (stored per frame, for a resume)."""
         return {name: int(values[world]) for name, values in self.tallies.items()}
 
-    def restore_counters(self, counters: dict) -> None:
-        """Continue the bookkeeping of `counters()` (a resumed run's)."""
+    def restore_counters(self, counters: dict, world: int = 0) -> None:
+        """Continue world `world`'s bookkeeping of `counters(world)` (a resumed run's)."""
         self.relax_iterations = []
         for name in self.TALLIES:
-            self.tallies[name][0] = int(counters[name])
+            self.tallies[name][world] = int(counters[name])
 
     def relax_iterations_mean(self, world: int = 0) -> float:
         """CG iterations per relaxation over the whole run."""

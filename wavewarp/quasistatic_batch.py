@@ -29,7 +29,8 @@ from .chemistry import telegraph_total
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh, icosphere
 from .parameters import as_dict
-from .quasistatic import frame_clock, initial_values, quasi_static_coupling, quasi_static_model, relaxation_measurements
+from .quasistatic import (COUNTER, frame_clock, initial_values, quasi_static_coupling, quasi_static_model,
+                          relaxation_measurements)
 from .runs import imperfect, mean_edge, scene_mesh
 
 
@@ -75,7 +76,8 @@ class QuasiStaticBatch(WorldsRun):
         mass, c, rate = self.operator.mass(), self.wave.concentration(), self.wave.velocity()
         self.invariants = [(float(mass[s] @ c[s]), float(mass[s] @ rate[s])) for s in self._slices]
         self.balance = ChemicalBalance(self.mesh, sensitive=p.sensitive, rule=rule, device=device, dtype=p.dtype)
-        self.series = {"positions": (n, 3), "concentration": (n,), "concentration_rate": (n,)}
+        self.series = {"positions": (n, 3), "concentration": (n,), "concentration_rate": (n,),
+                       **{COUNTER + name: () for name in self.coupled.TALLIES}}  # the bookkeeping, for a resume
         self.frame_interval = self.steps_per_frame * dt
         self.views = [WorldView(mesh, q, size=size, origin=np.asarray(origin, dtype=np.float64), front_start=front_start)
                       for mesh, q in zip(meshes, ps)]  # fmt: skip
@@ -95,18 +97,39 @@ class QuasiStaticBatch(WorldsRun):
     def world_frames(self, state: dict) -> list:
         """Every world's frame of the batch's `state.to_frame()`, as `QuasiStaticWaveRun.frame` (the series
         of `self.series`)."""
-        return [{name: values[s] for name, values in state.items() if name in self.series} for s in self._slices]
+        return [{**{name: values[s] for name, values in state.items() if name in self.series},
+                 **{COUNTER + name: np.array(value) for name, value in self.coupled.counters(w).items()}}
+                for w, s in enumerate(self._slices)]  # fmt: skip
 
-    def record(self, state: dict, frames: list) -> None:
-        """The chemical balance of every world and each running world's profile at the current frame."""
-        expected = [telegraph_total(total, rate, self.p.alpha, self.wave.dt, self.time) for total, rate in self.invariants]
-        self.balance.record(self.time, state["positions"], state["concentration"], expected)
+    def record(self, state: dict, frames: list, time: float | None = None) -> None:
+        """The chemical balance of every world and each running world's profile at the current frame (or at
+        `time`, a stored frame's)."""
+        time = self.time if time is None else time
+        expected = [telegraph_total(total, rate, self.p.alpha, self.wave.dt, time) for total, rate in self.invariants]
+        self.balance.record(time, state["positions"], state["concentration"], expected)
         if self._profile is None:
             return
         for w, (view, frame) in enumerate(zip(self.views, frames)):
             if w not in self.stopped:
-                view.profile_time = self.time
-                view.profiles.append((self.time, self._profile(view, frame["positions"])))
+                view.profile_time = time
+                view.profiles.append((time, self._profile(view, frame["positions"])))
+
+    def replay_frame(self, time: float, frames: list) -> None:
+        """Every world's stored frame at `time` (a resumed batch) into the balance and the profiles."""
+        joined = {name: np.concatenate([frame[name] for frame in frames]) for name in ("positions", "concentration")}
+        self.record(joined, frames, time)
+
+    def restore(self, time: float, frames: list) -> None:
+        """Continue every world from its stored frame at `time`: positions, c, c_t, the time and each world's
+        relaxation bookkeeping (as `QuasiStaticWaveRun.restore`)."""
+        joined = {name: np.concatenate([frame[name] for frame in frames])
+                  for name in ("positions", "concentration", "concentration_rate")}  # fmt: skip
+        self.coupled.state.assign_frame(joined)
+        self.coupled.restore(joined["positions"])
+        self.wave.steps = int(round(time / self.wave.dt))
+        self.wave.time = self.wave.steps * self.wave.dt
+        for w, frame in enumerate(frames):
+            self.coupled.restore_counters({name: frame[COUNTER + name] for name in self.coupled.TALLIES}, w)
 
     def _record(self, writers, stopped_after: dict) -> None:
         state = self.coupled.state.to_frame()  # one read of the device state per frame
