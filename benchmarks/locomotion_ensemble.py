@@ -37,7 +37,7 @@ def run_scene(scene: str, args, device) -> list:
     kill computes only the points without a result), its table kept as OUT/NAME.csv; the table's rows."""
     grid = {"AC": list(args.ac), "sensitive": ["true", "false"]}
     spec = SweepSpec(scene, grid=grid, seeds=args.seeds, first_seed=args.first_seed, fixed=(f"noise={args.noise}", *args.set),
-                     quick=args.quick, device="cuda" if device.is_cuda else "cpu")  # fmt: skip
+                     quick=args.quick, device="cuda" if device.is_cuda else "cpu", h5=args.h5)  # fmt: skip
     seeds = f"_seeds{args.first_seed}-{args.first_seed + args.seeds - 1}" if args.first_seed else ""
     name = f"locomotion_ensemble_{scene}_{device_tag(device)}{seeds}"
     folder = os.path.join(args.out, "sweeps", name)
@@ -120,6 +120,8 @@ def main(argv=None) -> int:
     parser.add_argument("--device-name", default=None, help="with --tables: the GPU or CPU that computed them")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="the scenes' quick runs, 2 AC values, 2 seeds")
+    parser.add_argument("--h5", action="store_true", help="keep each world's trajectory in its sweep's folder: a batch "
+                        "killed part-way goes on from its last stored frame when run again")  # fmt: skip
     args = parser.parse_args(argv)
     if args.quick:
         args.ac, args.seeds = ["0", "0.2"], 2

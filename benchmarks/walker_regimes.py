@@ -82,7 +82,7 @@ def run_regime(regime: str, scene: str, args, device: str, executor, priority: i
     OUT/REGIME_SCENE.csv."""
     fixed = (f"noise={args.noise}", f"periods={args.periods}", *REGIMES[regime], *args.set)
     spec = SweepSpec(scene, grid={"sensitive": ["true", "false"]}, seeds=args.seeds, fixed=fixed, quick=args.quick,
-                     device=device)  # fmt: skip
+                     device=device, h5=args.h5)  # fmt: skip
     folder = os.path.join(args.out, "sweeps", f"{regime}_{scene}")
     with dask.annotate(priority=priority):
         sweep(spec, folder, batch=args.seeds, executor=executor, report=lambda line: print(f"{regime} {scene}: {line}"))
@@ -365,6 +365,8 @@ def main(argv=None) -> int:
     parser.add_argument("--skip-pulses", type=int, default=0, metavar="N",
                         help="compare the twins without each seed's first N pulses (the gait's start-up; long runs)")
     parser.add_argument("--quick", action="store_true", help="the scenes' quick runs (a CPU smoke run)")
+    parser.add_argument("--h5", action="store_true", help="keep each world's trajectory in its sweep's folder: a batch "
+                        "killed part-way goes on from its last stored frame when run again")  # fmt: skip
     args = parser.parse_args(argv)
     if args.skip_pulses < 0:
         parser.error(f"--skip-pulses must be >= 0, got {args.skip_pulses}")

@@ -95,9 +95,10 @@ def test_the_sweeps_stay_in_the_output_folder_so_a_rerun_resumes(tmp_path, monke
     monkeypatch.setattr(locomotion_ensemble, "sweep", fake_sweep)
     common = ["bench", "locomotion_ensemble", "--device", "cpu", "--scenes", "sphere-walker", "--ac", "0", "0.2",
               "--seeds", "2", "--out", str(tmp_path)]  # fmt: skip
-    assert cli(common) == 0 and cli(common + ["--first-seed", "2"]) == 0
+    assert cli(common) == 0 and cli(common + ["--first-seed", "2", "--h5"]) == 0
     assert [folder for _, folder in calls] == [str(tmp_path / "sweeps" / "locomotion_ensemble_sphere-walker_cpu"),
                                                str(tmp_path / "sweeps" / "locomotion_ensemble_sphere-walker_cpu_seeds2-3")]  # fmt: skip
     assert calls[1][0].first_seed == 2 and calls[1][0].seeds == 2
+    assert not calls[0][0].h5 and calls[1][0].h5  # --h5: trajectories kept, a killed batch goes on
     assert (tmp_path / "locomotion_ensemble_sphere-walker_cpu.csv").is_file()
     assert (tmp_path / "locomotion_ensemble_sphere-walker_cpu_seeds2-3.csv").is_file()

@@ -1,13 +1,16 @@
 """`wavewarp bench walker_regimes --tables`: the twins' statistics and the paper's three claims from sweep
 tables, against NumPy on tables made up here (one regime meets every claim, one meets none)."""
 
+import argparse
 import csv
 import json
 import math
+import os
 
 import numpy as np
 import pytest
 
+from wavewarp.benchmarks import walker_regimes
 from wavewarp.cli import main as cli
 
 SPEEDS = {  # (regime, scene, sensitive): speeds of four seeds
@@ -236,6 +239,24 @@ def test_the_centres_height_drift_is_the_slope_at_the_crossings(tmp_path):
     assert cli(["bench", "walker_regimes", "--tables", str(tmp_path), "--device-name", "made up"]) == 0
     cell = json.loads((tmp_path / "walker_regimes.json").read_text())["regimes"]["overdamped-implicit-coulomb"]
     assert cell["scenes"]["sphere-walker"]["sensitive"]["height_drift_R_per_pulse"] is None
+
+
+def test_a_regimes_sweep_keeps_trajectories_with_h5(tmp_path, monkeypatch):
+    """--h5 reaches the regime's sweep (a batch killed part-way then goes on: tests/test_sweep_resume.py), its
+    fixed settings are the regime's, its folder OUT/sweeps/REGIME_SCENE."""
+    calls = []
+
+    def fake_sweep(spec, folder, **options):
+        calls.append((spec, folder))
+        os.makedirs(folder, exist_ok=True)
+        open(os.path.join(folder, "table.csv"), "w").close()
+
+    monkeypatch.setattr(walker_regimes, "sweep", fake_sweep)
+    for h5 in (False, True):
+        args = argparse.Namespace(noise=1e-3, periods=4.0, set=[], seeds=8, quick=False, out=str(tmp_path), h5=h5)
+        walker_regimes.run_regime("overdamped-implicit-coulomb-drag20", "prism-walker", args, "cpu", None)
+    assert [spec.h5 for spec, _ in calls] == [False, True]
+    assert "drag=20" in calls[1][0].fixed and calls[1][1] == str(tmp_path / "sweeps" / "overdamped-implicit-coulomb-drag20_prism-walker")
 
 
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):
