@@ -256,7 +256,8 @@ def test_a_regimes_sweep_keeps_trajectories_with_h5(tmp_path, monkeypatch):
         args = argparse.Namespace(noise=1e-3, periods=4.0, set=[], seeds=8, quick=False, out=str(tmp_path), h5=h5)
         walker_regimes.run_regime("overdamped-implicit-coulomb-drag20", "prism-walker", args, "cpu", None)
     assert [spec.h5 for spec, _ in calls] == [False, True]
-    assert "drag=20" in calls[1][0].fixed and calls[1][1] == str(tmp_path / "sweeps" / "overdamped-implicit-coulomb-drag20_prism-walker")
+    assert "drag=20" in calls[1][0].fixed
+    assert calls[1][1] == str(tmp_path / "sweeps" / "overdamped-implicit-coulomb-drag20_prism-walker")
 
 
 def test_walker_regimes_needs_tables_and_names_their_device(tmp_path):

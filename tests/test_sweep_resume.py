@@ -51,7 +51,8 @@ def assert_same_points(a, b, points) -> None:
             result.pop("resumed_after_frames", None)
             results.append(result)
         assert results[0] == results[1], point.name
-        with h5py.File(a / "points" / f"{point.name}.h5", "r") as f, h5py.File(b / "points" / f"{point.name}.h5", "r") as g:
+        name = f"{point.name}.h5"
+        with h5py.File(a / "points" / name, "r") as f, h5py.File(b / "points" / name, "r") as g:
             assert sorted(f["frames"]) == sorted(g["frames"])
             for name in f["frames"]:
                 np.testing.assert_array_equal(g["frames"][name][...], f["frames"][name][...], err_msg=name)

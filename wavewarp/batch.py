@@ -228,7 +228,8 @@ class WalkerBatch(WorldsRun):
         self.rotation.record(positions)
         for w, frame in enumerate(frames):
             rows = np.asarray(frame["trace"], dtype=np.float64)
-            self.traces[w] = np.concatenate([self.traces[w], rows[rows[:, 0] > self.traces[w][-1, 0] + 1e-9 * self.wave.dt]])
+            new = rows[:, 0] > self.traces[w][-1, 0] + 1e-9 * self.wave.dt  # the times after the last kept
+            self.traces[w] = np.concatenate([self.traces[w], rows[new]])
             self._frame_traces[w] = rows
 
     def restore(self, time: float, frames: list) -> None:

@@ -172,7 +172,8 @@ def started_batches(out: str, missing) -> tuple:
     by_name, started, taken = {point.name: point for point in missing}, [], set()
     for point in missing:
         names, frames = stored_batch(trajectory_path(out, point))
-        if frames and names and point.name not in taken and all(name in by_name and name not in taken for name in names):
+        free = all(name in by_name and name not in taken for name in names)
+        if frames and names and point.name not in taken and free:
             started.append([by_name[name] for name in names])
             taken.update(names)
     return started, [point for point in missing if point.name not in taken]
