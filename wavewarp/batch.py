@@ -29,7 +29,8 @@ from .measurements import BodyRotation, locomotion
 from .mesh import Mesh
 from .parameters import as_dict
 from .runs import WaveClock, imperfect, mean_edge
-from .walker import AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, settled_walker_dynamics, walker_model
+from .walker import (AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, restore_walk, settled_walker_dynamics,
+                     walker_model)
 
 PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "mirror", "noise", "elongation")  # and the seed: the rest is shared
 
@@ -237,15 +238,7 @@ class WalkerBatch(WorldsRun):
         joined = {name: np.concatenate([frame[name] for frame in frames])
                   for name in ("positions", "velocities", "concentration", "inhibitor", "reaction_per_vertex",
                                "first_arrival")}  # fmt: skip
-        self.coupled.state.assign_frame(joined)
-        self.wave.set_produced(0.0, joined["reaction_per_vertex"])
-        self.wave.steps = int(round(time / self.wave.dt))
-        self.wave.time = self.wave.steps * self.wave.dt
-        self.arrival.restore(joined["first_arrival"], self.wave.steps, self.wave.dt)
-        self.shell.update_reference(self.wave.c)
-        if self.ps[0].sensitive:
-            self.operator.update(self.dynamics.x)
-        wp.synchronize_device(self.shell.device)
+        restore_walk(self, {**joined, "time": time, "reaction_amount": 0.0}, self.ps[0].sensitive)
 
     def record(self) -> None:
         """The chemical balance of every world at the current frame."""

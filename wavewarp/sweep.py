@@ -202,7 +202,8 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
         result.update(status="failed", error=str(error), wall_time_s=time.perf_counter() - start)
         write_json(result_path(out, point), result)
         return result
-    writers, frames = [], resumable_frames(out, [point]) if spec.h5 and hasattr(run, "restore") else 0
+    writers = []
+    frames = resumable_frames(out, [point]) if spec.h5 and hasattr(run, "restore") else 0
     if spec.h5:
         writers.append(point_writer(out, [point], 0, mesh=run.mesh, series=run.series, scene=module.NAME,
                                     parameters=run.resolved, device=str(run.shell.device), resume_frames=frames))  # fmt: skip

@@ -318,17 +318,7 @@ class WalkerRun(WaveClock):
 
     def restore(self, frame: dict) -> None:
         """Continue from a saved frame (HDF5 resume): positions, velocities, c, w, the reaction's amount and the time."""
-        self.coupled.state.assign_frame(frame)
-        per_vertex = frame.get("reaction_per_vertex")  # NaN in a file written before it was stored
-        self.wave.set_produced(float(frame["reaction_amount"]),
-                               per_vertex if per_vertex is not None and np.isfinite(per_vertex).all() else None)
-        self.wave.steps = int(round(frame["time"] / self.wave.dt))
-        self.wave.time = self.wave.steps * self.wave.dt
-        self.arrival.restore(frame["first_arrival"], self.wave.steps, self.wave.dt)
-        self.shell.update_reference(self.wave.c)
-        if self.p.sensitive:
-            self.operator.update(self.dynamics.x)
-        wp.synchronize_device(self.shell.device)
+        restore_walk(self, frame, self.p.sensitive)
 
     def record(self, time: float, frame: dict, stored: bool = False) -> None:
         """Append the frame's trace rows (new times only), check the chemical's balance (C(0) plus the
@@ -357,6 +347,22 @@ class WalkerRun(WaveClock):
         locomotion_png([(self.name, self.p.sensitive, self.trace, self.forward, self.radius)], paths[0])
         frame_png(self, paths[1])
         return paths
+
+
+def restore_walk(run, frame: dict, sensitive: bool) -> None:
+    """A walker run's (or batch's: every world's frames joined) state from a saved frame: x, v, c, w, the reaction's
+    amounts, the first arrivals and the time; the reference and, `sensitive`, the wave's operator follow."""
+    run.coupled.state.assign_frame(frame)
+    per_vertex = frame.get("reaction_per_vertex")  # NaN in a file written before it was stored
+    run.wave.set_produced(float(frame["reaction_amount"]),
+                          per_vertex if per_vertex is not None and np.isfinite(per_vertex).all() else None)
+    run.wave.steps = int(round(frame["time"] / run.wave.dt))
+    run.wave.time = run.wave.steps * run.wave.dt
+    run.arrival.restore(frame["first_arrival"], run.wave.steps, run.wave.dt)
+    run.shell.update_reference(run.wave.c)
+    if sensitive:
+        run.operator.update(run.dynamics.x)
+    wp.synchronize_device(run.shell.device)
 
 
 def sphere_walker_recipe(p, *, mesh=None, device=None, bilayer=False, report=print) -> tuple:
