@@ -40,7 +40,7 @@ from wavewarp.dynamics import Ground, ShellDynamics  # noqa: E402
 from wavewarp.io import write_png, write_result  # noqa: E402
 from wavewarp.laplace import LaplaceBeltrami  # noqa: E402
 from wavewarp.mesh import Mesh, icosphere  # noqa: E402
-from wavewarp.shell import Shell  # noqa: E402
+from wavewarp.shell import REGULAR_PATCHES, Shell  # noqa: E402
 from wavewarp.walker import WalkerParameters, ground_lift  # noqa: E402
 from wavewarp.initial import gaussian_pulse  # noqa: E402
 from wavewarp.waves import FitzHughNagumo  # noqa: E402
@@ -156,7 +156,7 @@ def fma_kernel(iterations: int, out: wp.array(dtype=wp.float32)):
 
 
 def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: bool, gather_max_level: int,
-                staged_blocks=(), force_blocks=(), force_registers=()) -> list:  # fmt: skip
+                staged_blocks=(), force_blocks=(), force_registers=(), regular_patches=()) -> list:  # fmt: skip
     """One level's kernel timings; the atomic force kernel in blocks of `force_blocks` threads, with at most
     `force_registers` registers a thread, and the staged force kernels (`staged_blocks`, triangles per block) also record their largest force difference from the
     atomic scatter's (the default launch, blocks of 64), relative to its largest force."""
@@ -168,6 +168,9 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     shells = [("koiter forces, atomic scatter", dict())]
     shells += [("koiter forces, deterministic gather", dict(deterministic=True))] if level <= gather_max_level else []
     shells += [(f"koiter forces, atomic, {b} threads a block", dict(force_block=b)) for b in force_blocks]
+    shells += [(f"koiter forces, atomic, regular patches {m}" + (f", {b} threads a block" if b else ""),
+                dict(regular_patches=m, **(dict(force_block=b) if b else {})))
+               for m in regular_patches for b in (force_blocks or [None])]  # fmt: skip
     shells += [(f"koiter forces, atomic, ≤ {r} registers", dict(force_registers=r)) for r in force_registers]
     shells += [(f"koiter forces, staged {b} per block", dict(staged_block=b)) for b in staged_blocks]
     reference = None
@@ -316,6 +319,9 @@ def main(argv=None) -> int:
                         help="threads a block of extra rows of the atomic force kernel (its default launch: 64)")
     parser.add_argument("--force-registers", type=int, nargs="*", default=[],
                         help="registers a thread of extra rows of the atomic force kernel, the rest spilled (CUDA)")
+    parser.add_argument("--regular-patches", nargs="*", default=[], choices=REGULAR_PATCHES,
+                        help="extra rows of the atomic force kernel with these kernels for the regular patches (each "
+                             "at every --force-blocks size)")  # fmt: skip
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3, short timings (smoke test)")
@@ -332,7 +338,7 @@ def main(argv=None) -> int:
         rows = []
         for dtype in ("float32", "float64"):
             rows += kernel_rows(level, device.alias, dtype, budget, level <= args.numpy_max_level, args.gather_max_level,
-                                staged, args.force_blocks, args.force_registers)  # fmt: skip
+                                staged, args.force_blocks, args.force_registers, args.regular_patches)  # fmt: skip
         kernels += rows
         report(rows, peaks)
     for level in step_levels:

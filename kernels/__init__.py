@@ -5,7 +5,7 @@ import functools
 import warp as wp
 
 SCALARS = (wp.float32, wp.float64)
-BUILT_ON_DEMAND = ("staged",)  # modules whose kernels are made when first asked for, one per compile-time tile shape
+BUILT_ON_DEMAND = ("regular", "staged")  # modules whose kernels are made when first asked for (per rule, per tile shape)
 
 
 def _element(role: str, scalar):

@@ -292,14 +292,15 @@ def shell_forces_kernel(
     target: wp.array(dtype=wp.float64),
     penalty: wp.array(dtype=wp.float64),
     with_energy: int,
+    triangles: wp.array(dtype=wp.int32),
     energy_density: wp.array(dtype=wp.float64),
     forces: wp.array(dtype=Any),
 ):
-    """One thread per triangle: the energy density at its points (`with_energy`) and the exact forces
-    -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `moments` must hold the
-    volume moments; the x̄ part comes from `volume_centroid_force`), added to `forces` with one atomic
-    per patch vertex."""
-    t = wp.tid()
+    """One thread per triangle of the list `triangles`: the energy density at its points (`with_energy`)
+    and the exact forces -∂(E_S + E_B + E_V)/∂x of its patch (volume term with penalty > 0; `moments` must
+    hold the volume moments; the x̄ part comes from `volume_centroid_force`), added to `forces` with one
+    atomic per patch vertex."""
+    t = triangles[wp.tid()]
     start = patch_start[t]
     size = patch_start[t + 1] - start
     w = t // (triangle_type.shape[0] // worlds)

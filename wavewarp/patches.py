@@ -127,6 +127,14 @@ def block_unions(tables: PatchTables, block: int, multiple: int = 32) -> BlockUn
                        patch_local=local[local_key].astype(np.int32))  # fmt: skip
 
 
+def regular_patch_basis(rule: str = "3") -> tuple:
+    """The regular patch's basis at `rule`'s quadrature points and the rule's weights, as nested tuples (the
+    compile-time constants of kernels/regular.py): P rows of 12 entries [N, N,1, N,2, N,11, N,12, N,22]."""
+    points, weights = triangle_rule(rule)
+    table = patch_basis(6, 0, points[:, 0], points[:, 1])
+    return tuple(tuple(map(tuple, row)) for row in table.tolist()), tuple(weights.tolist())
+
+
 def build_patch_tables(triangles: np.ndarray, n_vertices: int, rule: str = "3") -> PatchTables:
     """Tables for a closed mesh; each triangle may touch at most one extraordinary vertex."""
     tri = np.asarray(triangles, dtype=np.int64)

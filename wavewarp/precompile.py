@@ -4,7 +4,8 @@ A fresh GPU machine otherwise compiles every kernel module a run launches before
 minutes for a walker and its gradient on an H200), and every worker of a sweep with its own cache does the same.
 `precompile([90])` writes each module's sm_90 code where Warp's loader looks for it (`WARP_CACHE_PATH`), for the
 launch configurations the code uses: the module default of 256 threads a block, and the force kernel's own
-(`kernels.shell.FORCE_BLOCK`). Copied or shared with the GPU machines, the cache turns their compiles into loads.
+(`kernels.shell.FORCE_BLOCK`). The regular-patch force kernels, made per rule and dtype, are compiled for the
+rules the scenes use (`RULES`). Copied or shared with the GPU machines, the cache turns their compiles into loads.
 """
 
 from __future__ import annotations
@@ -15,7 +16,11 @@ import pkgutil
 import warp as wp
 
 from . import kernels
-from .kernels import warp_modules
+from .kernels import SCALARS, warp_modules
+from .kernels.regular import regular_forces_kernel
+from .patches import regular_patch_basis
+
+RULES = ("3", "3x4")  # the scenes' quadrature rules (walkers and quick runs "3"; cube and prism wave guides "3x4")
 
 
 def kernel_modules() -> list:
@@ -33,4 +38,14 @@ def precompile(archs, modules=None, report=print) -> list:
         for compiled in warp_modules(module):
             paths += wp.compile_aot_module(compiled, arch=list(archs), use_ptx=False)
             report(f"{compiled.name}: sm_{', sm_'.join(map(str, archs))}")
+    if modules is None:
+        for kernel in regular_kernels():
+            paths += wp.compile_aot_module(kernel.module, arch=list(archs), use_ptx=False)
+            report(f"{kernel.module.name}: sm_{', sm_'.join(map(str, archs))}")
     return paths
+
+
+def regular_kernels(rules=RULES) -> list:
+    """The regular-patch force kernels a Shell of these rules launches by default, in both dtypes."""
+    return [regular_forces_kernel(*regular_patch_basis(rule), wp.types.type_repr(scalar))
+            for rule in rules for scalar in SCALARS]  # fmt: skip

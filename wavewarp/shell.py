@@ -26,6 +26,7 @@ from .kernels import register_capped
 from .kernels.adjoint import eval_shell_rates
 from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
+from .kernels.regular import regular_forces_kernel
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
     FORCE_BLOCK,
@@ -45,12 +46,13 @@ from .kernels.shell import (
     volume_terms_kernel,
 )
 from .mesh import Mesh
-from .patches import block_unions
+from .patches import block_unions, regular_patch_basis
 from .relax import NEWTON_STEPS, relax
 from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
+REGULAR_PATCHES = ("compiled", "held", "general")  # the atomic scatter's kernels (Shell's regular_patches)
 FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (each compiles its own variant)
 
 
@@ -107,7 +109,11 @@ class Shell:
     of a block of the (atomic) force kernel's CUDA launch: a multiple of 32 up to 256 (the kernel's
     ~160 registers a thread let three 64-thread blocks run on an SM where one of 256 does: 64, the
     default, is the fastest measured); force_registers=N caps that kernel's registers a thread on CUDA
-    (24–255; None: the compiler's choice), the rest spilling to local memory.
+    (24–255; None: the compiler's choice), the rest spilling to local memory. regular_patches: "compiled"
+    sends the regular triangles (every corner of valence 6) to a kernel with their patch basis compiled in
+    as constants (kernels/regular.py) and the others to the general kernel; "held" does the same holding
+    each patch's positions in registers across its points; "general" sends every triangle to the general
+    kernel. The choice concerns the atomic scatter only (not the staged or deterministic kernels).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -115,8 +121,8 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 staged_block=None, force_block=FORCE_BLOCK, force_registers=None, device=None,
-                 dtype="float32"):  # fmt: skip
+                 staged_block=None, force_block=FORCE_BLOCK, force_registers=None, regular_patches="compiled",
+                 device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
         self.mesh = mesh
@@ -195,6 +201,8 @@ class Shell:
         self.force_registers = force_registers
         self._force_kernel = (shell_forces_kernel if force_registers is None
                               else register_capped(shell_forces_kernel, force_registers))  # fmt: skip
+        self.regular_patches = regular_patches
+        self._force_launches = self._force_kernel_launches(regular_patches)
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -221,10 +229,27 @@ class Shell:
         twin = Shell(self.mesh, self._thickness, self._young, self.poisson, self._AC, self._AI, self._volume_penalty,
                      self.model, rule=self.rule, gradient=self.gradient, deterministic=self.deterministic,
                      bilayer_radius=self._bilayer_radius, staged_block=self.staged_block,
-                     force_block=self.force_block, force_registers=self.force_registers, device=self.device,
-                     dtype=dtype)  # fmt: skip
+                     force_block=self.force_block, force_registers=self.force_registers,
+                     regular_patches=self.regular_patches, device=self.device, dtype=dtype)  # fmt: skip
         twin.rest_volume = self.rest_volume
         return twin
+
+    def _force_kernel_launches(self, regular_patches: str) -> list:
+        """The atomic scatter's launches, (kernel, triangle list) each: regular triangles to the compiled-basis
+        kernel and the others to the general one, or every triangle to the general one."""
+        if regular_patches not in REGULAR_PATCHES:
+            raise ValueError(f"regular_patches must be one of {', '.join(REGULAR_PATCHES)}, got {regular_patches!r}")
+        host = self.tables.host
+        regular = (host.triangle_type == 0) if regular_patches != "general" else np.zeros(host.n_triangles, bool)
+        launches = []
+        with wp.ScopedDevice(self.device):
+            if regular.any():  # patch type 0 is the regular patch
+                kernel = regular_forces_kernel(*regular_patch_basis(self.rule), numpy_dtype(self.scalar).name,
+                                               regular_patches == "held")  # fmt: skip
+                launches.append((kernel, wp.array(np.flatnonzero(regular), dtype=wp.int32)))
+            if not regular.all():
+                launches.append((self._force_kernel, wp.array(np.flatnonzero(~regular), dtype=wp.int32)))
+        return launches
 
     def _staged_tables(self, block) -> dict:
         """The staged force kernel's launch: its kernel, blocks, per-block vertex unions and local patch table."""
@@ -431,8 +456,13 @@ class Shell:
                             inputs=inputs + [self._energy_density, staged["block_vertices"], forces],
                             device=self.device)  # fmt: skip
         elif not self.deterministic:
-            wp.launch(self._force_kernel, dim=self.mesh.n_triangles, inputs=inputs,
-                      outputs=[self._energy_density, forces], block_dim=self.force_block, device=self.device)  # fmt: skip
+            for kernel, triangles in self._force_launches:
+                if kernel is self._force_kernel:
+                    arguments = inputs + [triangles]
+                else:  # the compiled-basis kernel reads no basis table, type or weights
+                    arguments = inputs[:3] + [triangles] + inputs[6:14] + inputs[15:]
+                wp.launch(kernel, dim=len(triangles), inputs=arguments, outputs=[self._energy_density, forces],
+                          block_dim=self.force_block, device=self.device)  # fmt: skip
         else:
             wp.launch(shell_force_jets_kernel, dim=t.n_quadrature_points, inputs=inputs,
                       outputs=[self._energy_density, self._jets], device=self.device)  # fmt: skip

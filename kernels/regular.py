@@ -1,0 +1,111 @@
+"""Koiter shell forces on regular patches, their basis compiled in (docs/theory/geometry.md#regular-patches-compiled-in).
+
+A triangle whose three corners have valence 6 has a 12-vertex patch whose basis values at the quadrature
+points are the same for every such triangle (patch type 0), so they need not be read from a table: the
+kernel for one rule and dtype carries them as literals (`wp.static` over the unrolled loops), sums exactly
+12 entries with no bound checks, and keeps 12 force rows instead of the general kernel's 18. Every
+triangle of an icosphere but those around its 12 valence-5 vertices is regular; the others go through
+`shell_forces_kernel`. One kernel per (basis, weights, dtype, hold_positions), made on first use.
+"""
+
+import functools
+
+import warp as wp
+
+from .limit_surface import first_form, second_form
+from .shell import FORCE_BLOCK, VolumeMoments, koiter_density, koiter_gradient_jet, world_volume_terms
+
+REGULAR_PATCH = 12  # control vertices of a regular patch
+SCALAR_TYPES = {"float32": wp.float32, "float64": wp.float64}
+
+
+@functools.cache
+def regular_forces_kernel(basis: tuple, weights: tuple, dtype: str, hold_positions: bool = False):
+    """The force kernel of regular triangles for a rule whose regular-patch basis is `basis` (P rows of 12
+    entries [N, N,1, N,2, N,11, N,12, N,22], the rows of patch type 0) with quadrature `weights` (P), in
+    `dtype`. hold_positions: load the 12 relative positions once a triangle and keep them (36 more
+    registers) instead of reading them again at every point. Launch over the regular triangles' list."""
+    scalar = SCALAR_TYPES[dtype]
+    vec3, mat22 = wp.types.vector(3, scalar), wp.types.matrix((2, 2), scalar)
+    points = len(weights)
+
+    @wp.kernel(module="unique", enable_backward=False)  # forces only: no adjoint to compile
+    def regular_shell_forces(
+        x: wp.array(dtype=vec3),
+        patch_start: wp.array(dtype=wp.int32),
+        patch_vertices: wp.array(dtype=wp.int32),
+        regular: wp.array(dtype=wp.int32),
+        ref_metric: wp.array(dtype=mat22),
+        ref_metric_inv: wp.array(dtype=mat22),
+        ref_curvature: wp.array(dtype=mat22),
+        ref_weight: wp.array(dtype=scalar),
+        stretching_modulus: wp.array(dtype=scalar),
+        bending_modulus: wp.array(dtype=scalar),
+        nu: scalar,
+        worlds: int,
+        moments: wp.array(dtype=VolumeMoments),
+        target: wp.array(dtype=wp.float64),
+        penalty: wp.array(dtype=wp.float64),
+        with_energy: int,
+        energy_density: wp.array(dtype=wp.float64),
+        forces: wp.array(dtype=vec3),
+    ):
+        """`shell_forces_kernel` for triangle regular[i]: its points' energy densities (`with_energy`) and
+        the forces -∂(E_S + E_B + E_V)/∂x on its 12 patch vertices, one atomic each."""
+        t = regular[wp.tid()]
+        start = patch_start[t]
+        w = t // ((patch_start.shape[0] - 1) // worlds)
+        centroid, pressure = world_volume_terms(x, moments, target, penalty, worlds, w)
+        stretching, bending = stretching_modulus[w], bending_modulus[w]
+        origin = x[patch_vertices[start]]
+        held = wp.matrix(shape=(REGULAR_PATCH, 3), dtype=scalar)  # relative positions, with hold_positions
+        if wp.static(hold_positions):
+            for k in range(1, REGULAR_PATCH):
+                v = x[patch_vertices[start + k]] - origin
+                for c in range(3):
+                    held[k, c] = v[c]
+        accumulated = wp.matrix(shape=(REGULAR_PATCH, 3), dtype=scalar)  # one row per patch vertex
+        for point in range(wp.static(points)):
+            q = t * wp.static(points) + point
+            # the limit surface's jet at the point, relative to the first vertex (see `patch_jet`)
+            p, x1, x2, x11, x12, x22 = vec3(), vec3(), vec3(), vec3(), vec3(), vec3()
+            for k in range(1, REGULAR_PATCH):
+                v = vec3()
+                if wp.static(hold_positions):
+                    v = vec3(held[k, 0], held[k, 1], held[k, 2])
+                else:
+                    v = x[patch_vertices[start + k]] - origin
+                p += wp.static(scalar(basis[point][k][0])) * v
+                x1 += wp.static(scalar(basis[point][k][1])) * v
+                x2 += wp.static(scalar(basis[point][k][2])) * v
+                x11 += wp.static(scalar(basis[point][k][3])) * v
+                x12 += wp.static(scalar(basis[point][k][4])) * v
+                x22 += wp.static(scalar(basis[point][k][5])) * v
+            cross = wp.cross(x1, x2)
+            j = wp.length(cross)
+            n = cross / j
+            inv = ref_metric_inv[q]
+            membrane = inv * (first_form(x1, x2) - ref_metric[q])
+            bend = inv * (second_form(n, x11, x12, x22) - ref_curvature[q])
+            weight = ref_weight[q]
+            if with_energy != 0:
+                energy_density[q] = wp.float64(koiter_density(membrane, bend, stretching, bending, nu) * weight)
+            g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bend, inv, weight, stretching, bending, nu,
+                                                        x1, x2, x11, x12, x22, n, j)  # fmt: skip
+            scale = scalar(pressure) * wp.static(scalar(weights[point]))
+            r = p + origin - centroid
+            g = scale * j * n
+            g1 += scale * wp.cross(x2, r)
+            g2 += scale * wp.cross(r, x1)
+            for k in range(REGULAR_PATCH):
+                f = wp.static(scalar(basis[point][k][0])) * g + wp.static(scalar(basis[point][k][1])) * g1
+                f += wp.static(scalar(basis[point][k][2])) * g2 + wp.static(scalar(basis[point][k][3])) * g11
+                f += wp.static(scalar(basis[point][k][4])) * g12 + wp.static(scalar(basis[point][k][5])) * g22
+                for c in range(3):
+                    accumulated[k, c] = accumulated[k, c] - f[c]
+        for k in range(REGULAR_PATCH):
+            wp.atomic_add(forces, patch_vertices[start + k],
+                          vec3(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2]))  # fmt: skip
+
+    wp.set_module_options({"block_dim": FORCE_BLOCK}, regular_shell_forces.module)  # compiled for the force launch
+    return regular_shell_forces

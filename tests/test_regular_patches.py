@@ -1,0 +1,70 @@
+"""Koiter forces of regular patches with their basis compiled in (kernels/regular.py): which triangles take it,
+and its forces and energy against the general kernel's, in float64, for single and batched worlds."""
+
+import numpy as np
+import pytest
+import warp as wp
+from meshes import random_genus0
+
+from wavewarp.mesh import Mesh, icosphere
+from wavewarp.shell import Shell
+
+ACTIVE = dict(thickness=0.06, young=3.0, AC=0.4, AI=0.7, volume_penalty=3.0)
+
+
+def valence_six_triangles(mesh: Mesh) -> np.ndarray:
+    """Triangles whose three corners each lie in six triangles (a closed mesh: valence 6), counted directly."""
+    valence = np.bincount(mesh.triangles.ravel(), minlength=mesh.n_vertices)
+    return np.flatnonzero((valence[mesh.triangles] == 6).all(axis=1))
+
+
+@pytest.mark.parametrize("mode", ["compiled", "held"])
+def test_the_regular_triangles_take_the_compiled_kernel_and_every_other_the_general_one(mode):
+    mesh = random_genus0(24, 3).subdivided(1)  # valences 3 to 8 and regular triangles between them
+    shell = Shell(mesh, **ACTIVE, regular_patches=mode, device="cpu")
+    (regular_kernel, regular), (general_kernel, others) = shell._force_launches
+    assert general_kernel is shell._force_kernel and regular_kernel is not general_kernel
+    assert shell.twin("float32").regular_patches == mode
+    expected = valence_six_triangles(mesh)
+    assert 0 < len(expected) < mesh.n_triangles
+    assert np.array_equal(regular.numpy(), expected)
+    assert np.array_equal(np.sort(np.concatenate([regular.numpy(), others.numpy()])), np.arange(mesh.n_triangles))
+    (kernel, every), = Shell(mesh, **ACTIVE, regular_patches="general", device="cpu")._force_launches
+    assert np.array_equal(every.numpy(), np.arange(mesh.n_triangles))
+
+
+@pytest.mark.parametrize("rule", ["3", "6"])
+@pytest.mark.parametrize("model", ["koiter", "bilayer"])
+@pytest.mark.parametrize("mode", ["compiled", "held"])
+def test_compiled_basis_forces_and_energy_equal_the_general_kernels(mode, model, rule, rng):
+    """Two worlds of different couplings and moduli, away from rest, volume term on; float64."""
+    base = random_genus0(30, 5).subdivided(1)
+    mesh = Mesh.union([Mesh(base.vertices + 0.02 * rng.normal(size=base.vertices.shape), base.triangles)
+                       for _ in range(2)])  # fmt: skip
+    x, c = mesh.vertices + 0.02 * rng.normal(size=mesh.vertices.shape), rng.random(mesh.n_vertices)
+    options = dict(ACTIVE, AC=[0.1, 0.3], young=[3.0, 5.0], model=model, rule=rule, device="cpu", dtype="float64")
+    general = Shell(mesh, **options, regular_patches="general")
+    compiled = Shell(mesh, **options, regular_patches=mode)
+    expected = general.forces(x, c)
+    np.testing.assert_allclose(compiled.forces(x, c), expected, rtol=0, atol=1e-13 * np.abs(expected).max())
+    energies = []
+    for shell in (general, compiled):  # the energy the force launch writes (with_energy), not the energy kernel's
+        with wp.ScopedDevice("cpu"):
+            xs = wp.array(x, dtype=shell.vec3)
+            forces, energy = wp.zeros_like(xs), wp.zeros(1, dtype=wp.float64)
+        shell.forces_device(xs, forces, energy)
+        energies.append(energy.numpy()[0])
+    assert energies[0] > 0 and energies[1] == pytest.approx(energies[0], rel=1e-13)
+
+
+def test_float32_compiled_forces_track_the_float64_general_kernel(rng):
+    mesh = icosphere(3.0, 3)
+    x, c = mesh.vertices * (1 + 0.01 * rng.normal(size=(mesh.n_vertices, 1))), rng.random(mesh.n_vertices)
+    f64 = Shell(mesh, **ACTIVE, regular_patches="general", device="cpu", dtype="float64").forces(x, c)
+    f32 = Shell(mesh, **ACTIVE, regular_patches="compiled", device="cpu", dtype="float32").forces(x, c)
+    assert np.abs(f32 - f64).max() < 1e-4 * np.abs(f64).max()
+
+
+def test_an_unknown_choice_of_kernel_is_refused_by_name():
+    with pytest.raises(ValueError, match="regular_patches must be one of compiled, held, general, got 'fast'"):
+        Shell(icosphere(1.0, 1), **ACTIVE, regular_patches="fast", device="cpu")
