@@ -7,7 +7,7 @@ import warp as wp
 from meshes import random_genus0
 
 from wavewarp.mesh import Mesh, icosphere
-from wavewarp.shell import Shell
+from wavewarp.shell import HELD_FROM_TRIANGLES, Shell, auto_regular_patches
 
 ACTIVE = dict(thickness=0.06, young=3.0, AC=0.4, AI=0.7, volume_penalty=3.0)
 
@@ -29,8 +29,18 @@ def test_the_regular_triangles_take_the_compiled_kernel_and_every_other_the_gene
     assert 0 < len(expected) < mesh.n_triangles
     assert np.array_equal(regular.numpy(), expected)
     assert np.array_equal(np.sort(np.concatenate([regular.numpy(), others.numpy()])), np.arange(mesh.n_triangles))
-    (kernel, every), = Shell(mesh, **ACTIVE, regular_patches="general", device="cpu")._force_launches
-    assert np.array_equal(every.numpy(), np.arange(mesh.n_triangles))
+    for choice in ("general", "auto"):  # on the CPU "auto" is the general kernel
+        (kernel, every), = Shell(mesh, **ACTIVE, regular_patches=choice, device="cpu")._force_launches
+        assert kernel is shell._force_kernel and np.array_equal(every.numpy(), np.arange(mesh.n_triangles))
+
+
+def test_auto_holds_the_regular_patches_of_large_float32_shells_on_cuda_only():
+    assert auto_regular_patches(True, wp.float32, HELD_FROM_TRIANGLES) == "held"
+    assert auto_regular_patches(True, wp.float32, HELD_FROM_TRIANGLES - 1) == "general"
+    assert auto_regular_patches(True, wp.float64, 10 * HELD_FROM_TRIANGLES) == "general"
+    assert auto_regular_patches(False, wp.float32, 10 * HELD_FROM_TRIANGLES) == "general"
+    shell = Shell(icosphere(1.0, 2), **ACTIVE, device="cpu")
+    assert shell.regular_patches == "auto" and shell.regular_kernel == "general"
 
 
 @pytest.mark.parametrize("rule", ["3", "6"])
@@ -66,5 +76,5 @@ def test_float32_compiled_forces_track_the_float64_general_kernel(rng):
 
 
 def test_an_unknown_choice_of_kernel_is_refused_by_name():
-    with pytest.raises(ValueError, match="regular_patches must be one of compiled, held, general, got 'fast'"):
+    with pytest.raises(ValueError, match="regular_patches must be one of auto, held, compiled, general, got 'fast'"):
         Shell(icosphere(1.0, 1), **ACTIVE, regular_patches="fast", device="cpu")

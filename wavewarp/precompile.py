@@ -4,8 +4,9 @@ A fresh GPU machine otherwise compiles every kernel module a run launches before
 minutes for a walker and its gradient on an H200), and every worker of a sweep with its own cache does the same.
 `precompile([90])` writes each module's sm_90 code where Warp's loader looks for it (`WARP_CACHE_PATH`), for the
 launch configurations the code uses: the module default of 256 threads a block, and the force kernel's own
-(`kernels.shell.FORCE_BLOCK`). The regular-patch force kernels, made per rule and dtype, are compiled for the
-rules the scenes use (`RULES`). Copied or shared with the GPU machines, the cache turns their compiles into loads.
+(`kernels.shell.FORCE_BLOCK`). The regular-patch force kernel that large float32 shells launch (Shell's
+regular_patches="auto"), made per rule, is compiled for the rules the scenes use (`RULES`). Copied or shared
+with the GPU machines, the cache turns their compiles into loads.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import pkgutil
 import warp as wp
 
 from . import kernels
-from .kernels import SCALARS, warp_modules
+from .kernels import warp_modules
 from .kernels.regular import regular_forces_kernel
 from .patches import regular_patch_basis
 
@@ -46,6 +47,5 @@ def precompile(archs, modules=None, report=print) -> list:
 
 
 def regular_kernels(rules=RULES) -> list:
-    """The regular-patch force kernels a Shell of these rules launches by default, in both dtypes."""
-    return [regular_forces_kernel(*regular_patch_basis(rule), wp.types.type_repr(scalar))
-            for rule in rules for scalar in SCALARS]  # fmt: skip
+    """The regular-patch force kernels a Shell of these rules launches by default (held positions, float32)."""
+    return [regular_forces_kernel(*regular_patch_basis(rule), "float32", True) for rule in rules]

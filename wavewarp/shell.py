@@ -52,7 +52,8 @@ from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
-REGULAR_PATCHES = ("compiled", "held", "general")  # the atomic scatter's kernels (Shell's regular_patches)
+REGULAR_PATCHES = ("auto", "held", "compiled", "general")  # the atomic scatter's kernels (Shell's regular_patches)
+HELD_FROM_TRIANGLES = 2**18  # "auto" holds regular patches from here (float32, CUDA): 1.08× at 327,680 on an H200
 FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (each compiles its own variant)
 
 
@@ -96,6 +97,12 @@ class BilayerReference(KoiterReference):
     kernel = bilayer_reference_kernel
 
 
+def auto_regular_patches(is_cuda: bool, scalar, n_triangles: int) -> str:
+    """Shell's regular_patches="auto": "held" for float32 shells of at least HELD_FROM_TRIANGLES triangles on CUDA,
+    where it measured faster than the general kernel, else "general" (BENCHMARKS.md, Speed)."""
+    return "held" if is_cuda and scalar == wp.float32 and n_triangles >= HELD_FROM_TRIANGLES else "general"
+
+
 class Shell:
     """Active Koiter shell on the Loop limit surface of `mesh` (its vertices are the rest state).
 
@@ -113,7 +120,10 @@ class Shell:
     sends the regular triangles (every corner of valence 6) to a kernel with their patch basis compiled in
     as constants (kernels/regular.py) and the others to the general kernel; "held" does the same holding
     each patch's positions in registers across its points; "general" sends every triangle to the general
-    kernel. The choice concerns the atomic scatter only (not the staged or deterministic kernels).
+    kernel; "auto", the default, is "held" for float32 on CUDA from `HELD_FROM_TRIANGLES` triangles (all
+    worlds; 1.08–1.13× there on an H200) and "general" otherwise (the split's second launch costs more than
+    it saves on small shells; the CPU and float64 gain nothing). The choice concerns the atomic scatter only
+    (not the staged or deterministic kernels).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -121,7 +131,7 @@ class Shell:
 
     def __init__(self, mesh: Mesh, thickness, young, poisson=0.33, AC=0.0, AI=0.0, volume_penalty=0.0,
                  model="koiter", *, rule="3", gradient="analytic", deterministic=None, bilayer_radius=None,
-                 staged_block=None, force_block=FORCE_BLOCK, force_registers=None, regular_patches="compiled",
+                 staged_block=None, force_block=FORCE_BLOCK, force_registers=None, regular_patches="auto",
                  device=None, dtype="float32"):  # fmt: skip
         if not isinstance(mesh, Mesh):
             raise ValueError(f"mesh must be a wavewarp.mesh.Mesh, got {type(mesh).__name__}")
@@ -201,8 +211,12 @@ class Shell:
         self.force_registers = force_registers
         self._force_kernel = (shell_forces_kernel if force_registers is None
                               else register_capped(shell_forces_kernel, force_registers))  # fmt: skip
-        self.regular_patches = regular_patches
-        self._force_launches = self._force_kernel_launches(regular_patches)
+        if regular_patches not in REGULAR_PATCHES:
+            raise ValueError(f"regular_patches must be one of {', '.join(REGULAR_PATCHES)}, got {regular_patches!r}")
+        self.regular_patches = regular_patches  # as asked: a twin of another dtype decides "auto" for itself
+        self.regular_kernel = (auto_regular_patches(self.device.is_cuda, self.scalar, mesh.n_triangles)
+                               if regular_patches == "auto" else regular_patches)  # fmt: skip
+        self._force_launches = self._force_kernel_launches(self.regular_kernel)
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -237,8 +251,6 @@ class Shell:
     def _force_kernel_launches(self, regular_patches: str) -> list:
         """The atomic scatter's launches, (kernel, triangle list) each: regular triangles to the compiled-basis
         kernel and the others to the general one, or every triangle to the general one."""
-        if regular_patches not in REGULAR_PATCHES:
-            raise ValueError(f"regular_patches must be one of {', '.join(REGULAR_PATCHES)}, got {regular_patches!r}")
         host = self.tables.host
         regular = (host.triangle_type == 0) if regular_patches != "general" else np.zeros(host.n_triangles, bool)
         launches = []
