@@ -73,6 +73,9 @@ REGIMES = {
     # the prism and cube toward the sphere's sags (the prism sags 0.21% of R at Y = 200, 0.6% at Y = 34)
     "overdamped-implicit-coulomb-young5": [*OVERDAMPED, "sharpness=inf", "young=5", "settle=100"],
     "overdamped-implicit-coulomb-young2": [*OVERDAMPED, "sharpness=inf", "young=2", "settle=100"],
+    # the prism between its 2.6% (Y = 5) and 12% (Y = 2) sags, toward 8%
+    "overdamped-implicit-coulomb-young3": [*OVERDAMPED, "sharpness=inf", "young=3", "settle=100"],
+    "overdamped-implicit-coulomb-young2.5": [*OVERDAMPED, "sharpness=inf", "young=2.5", "settle=100"],
 }  # fmt: skip
 
 

@@ -67,6 +67,20 @@ def test_compiled_basis_forces_and_energy_equal_the_general_kernels(mode, model,
     assert energies[0] > 0 and energies[1] == pytest.approx(energies[0], rel=1e-13)
 
 
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="the CUDA launches of both kernels")
+@pytest.mark.parametrize("dtype, tolerance", [("float64", 1e-12), ("float32", 1e-5)])
+@pytest.mark.parametrize("mode", ["compiled", "held"])
+def test_compiled_basis_forces_equal_the_general_kernels_on_cuda(mode, dtype, tolerance, rng):
+    base = icosphere(3.0, 3)
+    mesh = Mesh.union([Mesh(base.vertices + 0.02 * rng.normal(size=base.vertices.shape), base.triangles)
+                       for _ in range(3)])  # fmt: skip
+    x, c = mesh.vertices + 0.02 * rng.normal(size=mesh.vertices.shape), rng.random(mesh.n_vertices)
+    options = dict(ACTIVE, AC=[0.1, 0.2, 0.3], device="cuda:0", dtype=dtype)
+    expected = Shell(mesh, **options, regular_patches="general").forces(x, c)
+    forces = Shell(mesh, **options, regular_patches=mode).forces(x, c)
+    np.testing.assert_allclose(forces, expected, rtol=0, atol=tolerance * np.abs(expected).max())
+
+
 def test_float32_compiled_forces_track_the_float64_general_kernel(rng):
     mesh = icosphere(3.0, 3)
     x, c = mesh.vertices * (1 + 0.01 * rng.normal(size=(mesh.n_vertices, 1))), rng.random(mesh.n_vertices)
