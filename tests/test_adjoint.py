@@ -463,7 +463,8 @@ def test_the_start_gradient_knows_a_horizontal_shift_changes_nothing(fixture, re
     put(run, start)
     gradient = WalkAdjoint(run).gradient(steps)["start"]
     x = gradient["x"]
-    assert np.abs(x.sum(axis=0)[:2]).max() < 1e-9 * np.abs(x).sum()
+    # round-off of the adjoint's sums over the walk's steps: 1.8e-9 of Σ|x| on one 2-core CPU, below 1e-9 on another
+    assert np.abs(x.sum(axis=0)[:2]).max() < 1e-8 * np.abs(x).sum()
     assert abs(x.sum(axis=0)[2]) > 1e-3 * np.abs(x).sum()
     if fixture == "coulomb_half_period":
         assert not gradient["v"].any()
