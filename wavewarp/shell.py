@@ -468,11 +468,11 @@ class Shell:
                             inputs=inputs + [self._energy_density, staged["block_vertices"], forces],
                             device=self.device)  # fmt: skip
         elif not self.deterministic:
+            stretching, bending = self._moduli if moduli is None else moduli
             for kernel, triangles in self._force_launches:
-                if kernel is self._force_kernel:
-                    arguments = inputs + [triangles]
-                else:  # the compiled-basis kernel reads no basis table, type or weights
-                    arguments = inputs[:3] + [triangles] + inputs[6:14] + inputs[15:]
+                arguments = (inputs + [triangles] if kernel is self._force_kernel else  # the regular kernel: no tables
+                             [x, t.patch_start, t.patch_vertices, triangles, *self.reference_arrays(), stretching,
+                              bending, self._s(self.poisson), self.worlds, *volume, int(energy is not None)])  # fmt: skip
                 wp.launch(kernel, dim=len(triangles), inputs=arguments, outputs=[self._energy_density, forces],
                           block_dim=self.force_block, device=self.device)  # fmt: skip
         else:
