@@ -1,31 +1,30 @@
-"""Koiter shell forces on regular patches, their basis compiled in (docs/theory/geometry.md#regular-patches-compiled-in).
+"""Koiter shell forces on regular patches, their basis compiled in
+(docs/theory/geometry.md#regular-patches-compiled-in).
 
 A triangle whose three corners have valence 6 has a 12-vertex patch whose basis values at the quadrature
 points are the same for every such triangle (patch type 0), so they need not be read from a table: the
 kernel for one rule and dtype carries them as literals (`wp.static` over the unrolled loops), sums exactly
 12 entries with no bound checks, and keeps 12 force rows instead of the general kernel's 18. Every
 triangle of an icosphere but those around its 12 valence-5 vertices is regular; the others go through
-`shell_forces_kernel`. One kernel per (basis, weights, dtype, hold_positions), made on first use.
+`shell_forces_kernel`. One kernel per (basis, weights, scalar, hold_positions), made on first use.
 """
 
 import functools
 
 import warp as wp
 
-from .limit_surface import first_form, second_form
-from .shell import FORCE_BLOCK, VolumeMoments, koiter_density, koiter_gradient_jet, world_volume_terms
+from .shell import FORCE_BLOCK, VolumeMoments, jet_strains, strains_gradient_jet, world_volume_terms
 
 REGULAR_PATCH = 12  # control vertices of a regular patch
-SCALAR_TYPES = {"float32": wp.float32, "float64": wp.float64}
 
 
 @functools.cache
-def regular_forces_kernel(basis: tuple, weights: tuple, dtype: str, hold_positions: bool = False):
+def regular_forces_kernel(basis: tuple, weights: tuple, scalar, hold_positions: bool = False):
     """The force kernel of regular triangles for a rule whose regular-patch basis is `basis` (P rows of 12
     entries [N, N,1, N,2, N,11, N,12, N,22], the rows of patch type 0) with quadrature `weights` (P), in
-    `dtype`. hold_positions: load the 12 relative positions once a triangle and keep them (36 more
-    registers) instead of reading them again at every point. Launch over the regular triangles' list."""
-    scalar = SCALAR_TYPES[dtype]
+    `scalar` (wp.float32 or wp.float64). hold_positions: load the 12 relative positions once a triangle and
+    keep them (36 more registers) instead of reading them again at every point. Launch over the regular
+    triangles' list."""
     vec3, mat22 = wp.types.vector(3, scalar), wp.types.matrix((2, 2), scalar)
     points = len(weights)
 
@@ -81,22 +80,12 @@ def regular_forces_kernel(basis: tuple, weights: tuple, dtype: str, hold_positio
                 x11 += wp.static(scalar(basis[point][k][3])) * v
                 x12 += wp.static(scalar(basis[point][k][4])) * v
                 x22 += wp.static(scalar(basis[point][k][5])) * v
-            cross = wp.cross(x1, x2)
-            j = wp.length(cross)
-            n = cross / j
             inv = ref_metric_inv[q]
-            membrane = inv * (first_form(x1, x2) - ref_metric[q])
-            bend = inv * (second_form(n, x11, x12, x22) - ref_curvature[q])
-            weight = ref_weight[q]
-            if with_energy != 0:
-                energy_density[q] = wp.float64(koiter_density(membrane, bend, stretching, bending, nu) * weight)
-            g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bend, inv, weight, stretching, bending, nu,
-                                                        x1, x2, x11, x12, x22, n, j)  # fmt: skip
-            scale = scalar(pressure) * wp.static(scalar(weights[point]))
-            r = p + origin - centroid
-            g = scale * j * n
-            g1 += scale * wp.cross(x2, r)
-            g2 += scale * wp.cross(r, x1)
+            membrane, bend, n, j = jet_strains(x1, x2, x11, x12, x22, inv, ref_metric[q], ref_curvature[q])
+            g, g1, g2, g11, g12, g22 = strains_gradient_jet(
+                membrane, bend, inv, p + origin, x1, x2, x11, x12, x22, n, j, q, ref_weight[q], stretching, bending,
+                nu, wp.static(scalar(weights[point])), centroid, pressure, with_energy, energy_density,
+            )  # fmt: skip
             for k in range(REGULAR_PATCH):
                 f = wp.static(scalar(basis[point][k][0])) * g + wp.static(scalar(basis[point][k][1])) * g1
                 f += wp.static(scalar(basis[point][k][2])) * g2 + wp.static(scalar(basis[point][k][3])) * g11

@@ -126,12 +126,19 @@ def koiter_jet(
     """Strains of the limit surface at one point: E = ā⁻¹(a - ā), K = ā⁻¹(b - b̄), plus the jet,
     the unit normal n and the area element j = |x,1 × x,2|."""
     p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    membrane, bending, n, j = jet_strains(x1, x2, x11, x12, x22, ref_inv, ref_metric, ref_curvature)
+    return membrane, bending, p, x1, x2, x11, x12, x22, n, j
+
+
+@wp.func
+def jet_strains(x1: Any, x2: Any, x11: Any, x12: Any, x22: Any, ref_inv: Any, ref_metric: Any, ref_curvature: Any):
+    """E = ā⁻¹(a - ā), K = ā⁻¹(b - b̄), the unit normal n and the area element j of a limit-surface jet."""
     cross = wp.cross(x1, x2)
     j = wp.length(cross)
     n = cross / j
     membrane = ref_inv * (first_form(x1, x2) - ref_metric)
     bending = ref_inv * (second_form(n, x11, x12, x22) - ref_curvature)
-    return membrane, bending, p, x1, x2, x11, x12, x22, n, j
+    return membrane, bending, n, j
 
 
 @wp.func
@@ -219,7 +226,18 @@ def point_gradient_jet(
     membrane, bending, p, x1, x2, x11, x12, x22, n, j = koiter_jet(
         x, patch_start, patch_vertices, basis, t, row, inv, ref_metric[q], ref_curvature[q]
     )
-    w = ref_weight[q]
+    return strains_gradient_jet(membrane, bending, inv, p, x1, x2, x11, x12, x22, n, j, q, ref_weight[q],
+                                stretching_modulus, bending_modulus, nu, weight, centroid, pressure, with_energy,
+                                energy_density)  # fmt: skip
+
+
+@wp.func
+def strains_gradient_jet(
+    membrane: Any, bending: Any, inv: Any, p: Any, x1: Any, x2: Any, x11: Any, x12: Any, x22: Any, n: Any, j: Any,
+    q: int, w: Any, stretching_modulus: Any, bending_modulus: Any, nu: Any, weight: Any, centroid: Any,
+    pressure: wp.float64, with_energy: int, energy_density: wp.array(dtype=wp.float64),
+):  # fmt: skip
+    """`point_gradient_jet` from point q's strains and jet (reference area weight w, quadrature weight `weight`)."""
     if with_energy != 0:
         energy_density[q] = wp.float64(koiter_density(membrane, bending, stretching_modulus, bending_modulus, nu) * w)
     g1, g2, g11, g12, g22 = koiter_gradient_jet(membrane, bending, inv, w, stretching_modulus, bending_modulus, nu,

@@ -48,4 +48,4 @@ def precompile(archs, modules=None, report=print) -> list:
 
 def regular_kernels(rules=RULES) -> list:
     """The regular-patch force kernels a Shell of these rules launches by default (held positions, float32)."""
-    return [regular_forces_kernel(*regular_patch_basis(rule), "float32", True) for rule in rules]
+    return [regular_forces_kernel(*regular_patch_basis(rule), wp.float32, True) for rule in rules]

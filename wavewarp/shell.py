@@ -256,8 +256,7 @@ class Shell:
         launches = []
         with wp.ScopedDevice(self.device):
             if regular.any():  # patch type 0 is the regular patch
-                kernel = regular_forces_kernel(*regular_patch_basis(self.rule), numpy_dtype(self.scalar).name,
-                                               regular_patches == "held")  # fmt: skip
+                kernel = regular_forces_kernel(*regular_patch_basis(self.rule), self.scalar, regular_patches == "held")
                 launches.append((kernel, wp.array(np.flatnonzero(regular), dtype=wp.int32)))
             if not regular.all():
                 launches.append((self._force_kernel, wp.array(np.flatnonzero(~regular), dtype=wp.int32)))
