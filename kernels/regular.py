@@ -6,7 +6,13 @@ points are the same for every such triangle (patch type 0), so they need not be 
 kernel for one rule and dtype carries them as literals (`wp.static` over the unrolled loops), sums exactly
 12 entries with no bound checks, and keeps 12 force rows instead of the general kernel's 18. Every
 triangle of an icosphere but those around its 12 valence-5 vertices is regular; the others go through
-`shell_forces_kernel`. One kernel per (basis, weights, scalar, hold_positions), made on first use.
+`shell_forces_kernel`. One kernel per (basis, weights, scalar, hold_positions, vector_atomics), made on first use.
+
+With vector_atomics (float32) each patch vertex's force is one 16-byte reduction (sm_90's
+`red.global.v4.f32.add`) into a vec4 accumulator instead of three scalar atomics into the vec3 forces:
+a third of the L2 atomic operations, each within one aligned sector. `fold_padded_forces_kernel` then
+adds the accumulator into the forces and clears it. Below sm_90 and on the CPU the same accumulator
+takes three scalar adds.
 """
 
 import functools
@@ -18,14 +24,43 @@ from .shell import FORCE_BLOCK, VolumeMoments, jet_strains, strains_gradient_jet
 REGULAR_PATCH = 12  # control vertices of a regular patch
 
 
+@wp.func_native("""
+#if defined(__CUDA_ARCH__) && (__CUDA_ARCH__ >= 900)
+asm volatile("red.global.v4.f32.add [%0], {%1, %2, %3, %4};"
+             :: "l"(forces.data + i), "f"(f[0]), "f"(f[1]), "f"(f[2]), "f"(0.0f) : "memory");
+#else
+wp::atomic_add(&forces.data[i].c[0], f[0]);
+wp::atomic_add(&forces.data[i].c[1], f[1]);
+wp::atomic_add(&forces.data[i].c[2], f[2]);
+#endif
+""")
+def add_padded_force(forces: wp.array(dtype=wp.vec4f), i: int, f: wp.vec3f):
+    """forces[i].xyz += f atomically: one 16-byte vector reduction on sm_90 and later, three scalar adds before."""
+    ...
+
+
+@wp.kernel(enable_backward=False)
+def fold_padded_forces_kernel(padded: wp.array(dtype=wp.vec4f), forces: wp.array(dtype=wp.vec3f)):
+    """forces[i] += padded[i].xyz, and padded[i] cleared for the next evaluation."""
+    i = wp.tid()
+    f = padded[i]
+    forces[i] = forces[i] + wp.vec3f(f[0], f[1], f[2])
+    padded[i] = wp.vec4f()
+
+
 @functools.cache
-def regular_forces_kernel(basis: tuple, weights: tuple, scalar, hold_positions: bool = False):
+def regular_forces_kernel(basis: tuple, weights: tuple, scalar, hold_positions: bool = False,
+                          vector_atomics: bool = False):
     """The force kernel of regular triangles for a rule whose regular-patch basis is `basis` (P rows of 12
     entries [N, N,1, N,2, N,11, N,12, N,22], the rows of patch type 0) with quadrature `weights` (P), in
     `scalar` (wp.float32 or wp.float64). hold_positions: load the 12 relative positions once a triangle and
-    keep them (36 more registers) instead of reading them again at every point. Launch over the regular
-    triangles' list."""
+    keep them (36 more registers) instead of reading them again at every point. vector_atomics (float32 only):
+    add the forces into a vec4 accumulator with `add_padded_force` (then `fold_padded_forces_kernel`). Launch
+    over the regular triangles' list."""
+    if vector_atomics and scalar != wp.float32:
+        raise ValueError("vector atomics add float32 forces (sm_90's red.global.v4.f32.add): float64 has none")
     vec3, mat22 = wp.types.vector(3, scalar), wp.types.matrix((2, 2), scalar)
+    out = wp.vec4f if vector_atomics else vec3  # the forces' element: the padded accumulator's with vector_atomics
     points = len(weights)
 
     @wp.kernel(module="unique", enable_backward=False)  # forces only: no adjoint to compile
@@ -47,10 +82,10 @@ def regular_forces_kernel(basis: tuple, weights: tuple, scalar, hold_positions: 
         penalty: wp.array(dtype=wp.float64),
         with_energy: int,
         energy_density: wp.array(dtype=wp.float64),
-        forces: wp.array(dtype=vec3),
+        forces: wp.array(dtype=out),
     ):
         """`shell_forces_kernel` for triangle regular[i]: its points' energy densities (`with_energy`) and
-        the forces -∂(E_S + E_B + E_V)/∂x on its 12 patch vertices, one atomic each."""
+        the forces -∂(E_S + E_B + E_V)/∂x on its 12 patch vertices, one atomic add each."""
         t = regular[wp.tid()]
         start = patch_start[t]
         w = t // ((patch_start.shape[0] - 1) // worlds)
@@ -93,8 +128,11 @@ def regular_forces_kernel(basis: tuple, weights: tuple, scalar, hold_positions: 
                 for c in range(3):
                     accumulated[k, c] = accumulated[k, c] - f[c]
         for k in range(REGULAR_PATCH):
-            wp.atomic_add(forces, patch_vertices[start + k],
-                          vec3(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2]))  # fmt: skip
+            f = vec3(accumulated[k, 0], accumulated[k, 1], accumulated[k, 2])
+            if wp.static(vector_atomics):
+                add_padded_force(forces, patch_vertices[start + k], f)
+            else:
+                wp.atomic_add(forces, patch_vertices[start + k], f)
 
     wp.set_module_options({"block_dim": FORCE_BLOCK}, regular_shell_forces.module)  # compiled for the force launch
     return regular_shell_forces

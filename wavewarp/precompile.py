@@ -4,8 +4,9 @@ A fresh GPU machine otherwise compiles every kernel module a run launches before
 minutes for a walker and its gradient on an H200), and every worker of a sweep with its own cache does the same.
 `precompile([90])` writes each module's sm_90 code where Warp's loader looks for it (`WARP_CACHE_PATH`), for the
 launch configurations the code uses: the module default of 256 threads a block, and the force kernel's own
-(`kernels.shell.FORCE_BLOCK`). The regular-patch force kernel that large float32 shells launch (Shell's
-regular_patches="auto"), made per rule, is compiled for the rules the scenes use (`RULES`). Copied or shared
+(`kernels.shell.FORCE_BLOCK`). The regular-patch force kernels that large float32 shells launch (Shell's
+regular_patches="auto": "vector" on sm_90 and later, "held" before), made per rule, are compiled for the rules the
+scenes use (`RULES`), with the vector atomics' fold. Copied or shared
 with the GPU machines, the cache turns their compiles into loads.
 """
 
@@ -18,7 +19,7 @@ import warp as wp
 
 from . import kernels
 from .kernels import warp_modules
-from .kernels.regular import regular_forces_kernel
+from .kernels.regular import fold_padded_forces_kernel, regular_forces_kernel
 from .patches import regular_patch_basis
 
 RULES = ("3", "3x4")  # the scenes' quadrature rules (walkers and quick runs "3"; cube and prism wave guides "3x4")
@@ -40,12 +41,14 @@ def precompile(archs, modules=None, report=print) -> list:
             paths += wp.compile_aot_module(compiled, arch=list(archs), use_ptx=False)
             report(f"{compiled.name}: sm_{', sm_'.join(map(str, archs))}")
     if modules is None:
-        for kernel in regular_kernels():
+        for kernel in regular_kernels() + [fold_padded_forces_kernel]:
             paths += wp.compile_aot_module(kernel.module, arch=list(archs), use_ptx=False)
             report(f"{kernel.module.name}: sm_{', sm_'.join(map(str, archs))}")
     return paths
 
 
 def regular_kernels(rules=RULES) -> list:
-    """The regular-patch force kernels a Shell of these rules launches by default (held positions, float32)."""
-    return [regular_forces_kernel(*regular_patch_basis(rule), wp.float32, True) for rule in rules]
+    """The regular-patch force kernels a Shell of these rules launches by default (float32, held positions, with
+    vector atomics and without)."""
+    return [regular_forces_kernel(*regular_patch_basis(rule), wp.float32, True, vector)
+            for rule in rules for vector in (True, False)]  # fmt: skip

@@ -26,7 +26,7 @@ from .kernels import register_capped
 from .kernels.adjoint import eval_shell_rates
 from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
-from .kernels.regular import regular_forces_kernel
+from .kernels.regular import fold_padded_forces_kernel, regular_forces_kernel
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
     FORCE_BLOCK,
@@ -52,8 +52,11 @@ from .self_contact import SelfContact
 
 MODELS = ("koiter", "bilayer")
 GRADIENTS = ("analytic", "autodiff")
-REGULAR_PATCHES = ("auto", "held", "compiled", "general")  # the atomic scatter's kernels (Shell's regular_patches)
+REGULAR_PATCHES = ("auto", "vector", "held", "compiled", "general")  # the atomic scatter's kernels (regular_patches)
 HELD_FROM_TRIANGLES = 2**18  # "auto" holds regular patches from here (float32, CUDA): 1.08× at 327,680 on an H200
+VECTOR_FROM_TRIANGLES = 2**16  # "auto" adds them with vector atomics from here (float32, sm_90 on), H200:
+# the general kernel 1.13× faster at 20,480 triangles, the vector kernel 1.42× faster at 81,920
+VECTOR_ATOMICS_ARCH = 90  # red.global.v4.f32.add: compute capability 9.0 on
 FORCE_BLOCKS = (32, 64, 96, 128, 160, 192, 224, 256)  # threads a block of the force launch (each compiles its own variant)
 
 
@@ -97,10 +100,23 @@ class BilayerReference(KoiterReference):
     kernel = bilayer_reference_kernel
 
 
-def auto_regular_patches(is_cuda: bool, scalar, n_triangles: int) -> str:
-    """Shell's regular_patches="auto": "held" for float32 shells of at least HELD_FROM_TRIANGLES triangles on CUDA,
-    where it measured faster than the general kernel, else "general" (BENCHMARKS.md, Speed)."""
-    return "held" if is_cuda and scalar == wp.float32 and n_triangles >= HELD_FROM_TRIANGLES else "general"
+def auto_regular_patches(cuda_arch: int | None, scalar, n_triangles: int) -> str:
+    """Shell's regular_patches="auto" on a CUDA device of compute capability `cuda_arch` × 0.1 (None: the CPU):
+    for float32, "vector" from VECTOR_FROM_TRIANGLES triangles on sm_90 and later, "held" from HELD_FROM_TRIANGLES
+    before, where each measured faster than the general kernel; "general" otherwise (BENCHMARKS.md, Speed)."""
+    if cuda_arch is None or scalar != wp.float32:
+        return "general"
+    if cuda_arch >= VECTOR_ATOMICS_ARCH:
+        return "vector" if n_triangles >= VECTOR_FROM_TRIANGLES else "general"
+    return "held" if n_triangles >= HELD_FROM_TRIANGLES else "general"
+
+
+def resolved_regular_patches(regular_patches: str, cuda_arch: int | None, scalar, n_triangles: int) -> str:
+    """The kernel a Shell's `regular_patches` choice launches: "auto" decided, and "vector" in float64 (which has
+    no vector atomics) "held"."""
+    if regular_patches == "auto":
+        return auto_regular_patches(cuda_arch, scalar, n_triangles)
+    return "held" if regular_patches == "vector" and scalar != wp.float32 else regular_patches
 
 
 class Shell:
@@ -119,11 +135,13 @@ class Shell:
     (24–255; None: the compiler's choice), the rest spilling to local memory. regular_patches: "compiled"
     sends the regular triangles (every corner of valence 6) to a kernel with their patch basis compiled in
     as constants (kernels/regular.py) and the others to the general kernel; "held" does the same holding
-    each patch's positions in registers across its points; "general" sends every triangle to the general
-    kernel; "auto", the default, is "held" for float32 on CUDA from `HELD_FROM_TRIANGLES` triangles (all
-    worlds; 1.08–1.13× there on an H200) and "general" otherwise (the split's second launch costs more than
-    it saves on small shells; the CPU and float64 gain nothing). The choice concerns the atomic scatter only
-    (not the staged or deterministic kernels).
+    each patch's positions in registers across its points; "vector" holds them too and adds each vertex's
+    force as one 16-byte vector atomic (sm_90 on; float32: in float64 it is "held") into a padded accumulator
+    folded into the forces after; "general" sends every triangle to the general kernel; "auto", the default,
+    is for float32 on CUDA "vector" from `VECTOR_FROM_TRIANGLES` triangles (all worlds) on sm_90 and later,
+    "held" from `HELD_FROM_TRIANGLES` before, and "general" otherwise (the split's extra launches cost more
+    than they save on small shells; the CPU and float64 gain nothing). The choice concerns the atomic scatter
+    only (not the staged or deterministic kernels).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -214,9 +232,11 @@ class Shell:
         if regular_patches not in REGULAR_PATCHES:
             raise ValueError(f"regular_patches must be one of {', '.join(REGULAR_PATCHES)}, got {regular_patches!r}")
         self.regular_patches = regular_patches  # as asked: a twin of another dtype decides "auto" for itself
-        self.regular_kernel = (auto_regular_patches(self.device.is_cuda, self.scalar, mesh.n_triangles)
-                               if regular_patches == "auto" else regular_patches)  # fmt: skip
+        arch = self.device.arch if self.device.is_cuda else None
+        self.regular_kernel = resolved_regular_patches(regular_patches, arch, self.scalar, mesh.n_triangles)
         self._force_launches = self._force_kernel_launches(self.regular_kernel)
+        self._padded_forces = (wp.zeros(mesh.n_vertices, dtype=wp.vec4f, device=self.device)
+                               if self.regular_kernel == "vector" else None)  # the vector atomics' accumulator
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -256,7 +276,8 @@ class Shell:
         launches = []
         with wp.ScopedDevice(self.device):
             if regular.any():  # patch type 0 is the regular patch
-                kernel = regular_forces_kernel(*regular_patch_basis(self.rule), self.scalar, regular_patches == "held")
+                kernel = regular_forces_kernel(*regular_patch_basis(self.rule), self.scalar,
+                                               regular_patches in ("held", "vector"), regular_patches == "vector")
                 launches.append((kernel, wp.array(np.flatnonzero(regular), dtype=wp.int32)))
             if not regular.all():
                 launches.append((self._force_kernel, wp.array(np.flatnonzero(~regular), dtype=wp.int32)))
@@ -472,8 +493,12 @@ class Shell:
                 arguments = (inputs + [triangles] if kernel is self._force_kernel else  # the regular kernel: no tables
                              [x, t.patch_start, t.patch_vertices, triangles, *self.reference_arrays(), stretching,
                               bending, self._s(self.poisson), self.worlds, *volume, int(energy is not None)])  # fmt: skip
-                wp.launch(kernel, dim=len(triangles), inputs=arguments, outputs=[self._energy_density, forces],
+                added = forces if kernel is self._force_kernel or self._padded_forces is None else self._padded_forces
+                wp.launch(kernel, dim=len(triangles), inputs=arguments, outputs=[self._energy_density, added],
                           block_dim=self.force_block, device=self.device)  # fmt: skip
+            if self._padded_forces is not None:
+                wp.launch(fold_padded_forces_kernel, dim=len(forces), inputs=[self._padded_forces], outputs=[forces],
+                          device=self.device)  # fmt: skip
         else:
             wp.launch(shell_force_jets_kernel, dim=t.n_quadrature_points, inputs=inputs,
                       outputs=[self._energy_density, self._jets], device=self.device)  # fmt: skip
