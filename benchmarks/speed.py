@@ -184,6 +184,13 @@ def kernel_rows(level: int, device, dtype: str, budget: float, numpy_baseline: b
     shell.forces(x, c)
     rows.append(dict(kernel="shell forces (koiter + volume)",
                      seconds=seconds_per_call(lambda: shell.forces_device(shell._x, shell._forces), device, budget)))  # fmt: skip
+    for mode in regular_patches:  # the volume moments follow the choice: one triangle an item unless "general"
+        whole = walker_shell(level, device, dtype, regular_patches=mode)[1]
+        whole.forces(x, c)
+        rows.append(dict(kernel=f"volume moments, regular patches {mode}",
+                         seconds=seconds_per_call(lambda s=whole: s._launch_volume(s._x, False), device, budget)))
+        rows.append(dict(kernel=f"shell forces (koiter + volume), regular patches {mode}",
+                         seconds=seconds_per_call(lambda s=whole: s.forces_device(s._x, s._forces), device, budget)))
     operator = LaplaceBeltrami(mesh, device=device, dtype=dtype)
     with wp.ScopedDevice(operator.device):
         cw, out = wp.array(c.astype(shell._real), dtype=shell.scalar), wp.empty(mesh.n_vertices, dtype=shell.scalar)
@@ -321,7 +328,8 @@ def main(argv=None) -> int:
                         help="registers a thread of extra rows of the atomic force kernel, the rest spilled (CUDA)")
     parser.add_argument("--regular-patches", nargs="*", default=[], choices=REGULAR_PATCHES,
                         help="extra rows of the atomic force kernel with these kernels for the regular patches (each "
-                             "at every --force-blocks size)")  # fmt: skip
+                             "at every --force-blocks size), and of the volume moments and the whole shell force with "
+                             "each")  # fmt: skip
     parser.add_argument("--budget", type=float, default=0.5, help="seconds per timing")
     parser.add_argument("--out", default="benchmarks/results")
     parser.add_argument("--quick", action="store_true", help="levels 2 and 3, short timings (smoke test)")

@@ -13,12 +13,17 @@ With vector_atomics (float32) each patch vertex's force is one 16-byte reduction
 a third of the L2 atomic operations, each within one aligned sector. `fold_padded_forces_kernel` then
 adds the accumulator into the forces and clears it. Below sm_90 and on the CPU the same accumulator
 takes three scalar adds.
+
+`regular_volume_kernel` sums the volume moments the same way: one triangle an item, a regular one from its
+12 positions read once with the basis as literals.
 """
 
 import functools
 
 import warp as wp
 
+from .limit_surface import basis_row, patch_jet
+from .reduce import block_add
 from .shell import FORCE_BLOCK, VolumeMoments, jet_strains, strains_gradient_jet, world_volume_terms
 
 REGULAR_PATCH = 12  # control vertices of a regular patch
@@ -136,3 +141,68 @@ def regular_forces_kernel(basis: tuple, weights: tuple, scalar, hold_positions: 
 
     wp.set_module_options({"block_dim": FORCE_BLOCK}, regular_shell_forces.module)  # compiled for the force launch
     return regular_shell_forces
+
+
+@functools.cache
+def regular_volume_kernel(basis: tuple, weights: tuple, scalar):
+    """`volume_kernel` with one triangle an item: a regular triangle's points from its 12 positions read once and
+    the basis as literals (`regular_forces_kernel`'s), any other triangle's through the basis table. The same
+    launch and moments: `threads` per world (whole blocks) over max(triangles, vertices) items a world."""
+    vec3 = wp.types.vector(3, scalar)
+    points = len(weights)
+    third_weights = [float(wp.dtype_to_numpy(scalar)(w)) / 3.0 for w in weights]  # w as the table holds it
+
+    @wp.kernel(module="unique", enable_backward=False)  # the differentiable sum is `volume_terms_kernel`'s
+    def regular_volume(
+        x: wp.array(dtype=vec3),
+        patch_start: wp.array(dtype=wp.int32),
+        patch_vertices: wp.array(dtype=wp.int32),
+        triangle_type: wp.array(dtype=wp.int32),
+        basis_table: wp.array2d(dtype=wp.types.vector(6, scalar)),
+        weights_table: wp.array(dtype=scalar),
+        points_per_triangle: int,
+        worlds: int,
+        items: int,
+        threads: int,
+        moments: wp.array(dtype=VolumeMoments),
+    ):
+        """moments[w] += world w's [S, V₀, Σx] (`volume_kernel`), item i its triangle i and its vertex i."""
+        w = wp.tid() // threads
+        triangles = triangle_type.shape[0] // worlds
+        vertices = x.shape[0] // worlds
+        area_normal = wp.vec3d()
+        moment = wp.float64(0.0)
+        xi = wp.vec3d()
+        for i in range(wp.tid() - w * threads, items, threads):
+            t = w * triangles + i
+            if i < triangles and triangle_type[t] == 0:
+                start = patch_start[t]
+                origin = x[patch_vertices[start]]
+                held = wp.matrix(shape=(REGULAR_PATCH, 3), dtype=scalar)
+                for k in range(1, REGULAR_PATCH):
+                    v = x[patch_vertices[start + k]] - origin
+                    for c in range(3):
+                        held[k, c] = v[c]
+                for point in range(wp.static(points)):
+                    p, x1, x2 = vec3(), vec3(), vec3()
+                    for k in range(1, REGULAR_PATCH):
+                        v = vec3(held[k, 0], held[k, 1], held[k, 2])
+                        p += wp.static(scalar(basis[point][k][0])) * v
+                        x1 += wp.static(scalar(basis[point][k][1])) * v
+                        x2 += wp.static(scalar(basis[point][k][2])) * v
+                    a = wp.vec3d(wp.cross(x1, x2)) * wp.static(wp.float64(third_weights[point]))
+                    area_normal += a
+                    moment += wp.dot(wp.vec3d(p + origin), a)
+            elif i < triangles:
+                for point in range(points_per_triangle):
+                    u, row = basis_row(triangle_type, points_per_triangle, t * points_per_triangle + point)
+                    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis_table, u, row)
+                    a = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights_table[point]) / wp.float64(3.0))
+                    area_normal += a
+                    moment += wp.dot(wp.vec3d(p), a)
+            if i < vertices:
+                xi += wp.vec3d(x[w * vertices + i])
+        total = VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2])
+        block_add(moments, w, total)
+
+    return regular_volume

@@ -6,8 +6,8 @@ minutes for a walker and its gradient on an H200), and every worker of a sweep w
 launch configurations the code uses: the module default of 256 threads a block, and the force kernel's own
 (`kernels.shell.FORCE_BLOCK`). The regular-patch force kernels that large float32 shells launch (Shell's
 regular_patches="auto": "vector" on sm_90 and later, "held" before), made per rule, are compiled for the rules the
-scenes use (`RULES`), with the vector atomics' fold. Copied or shared
-with the GPU machines, the cache turns their compiles into loads.
+scenes use (`RULES`), with the vector atomics' fold and the same shells' volume-moment kernel. Copied or shared with
+the GPU machines, the cache turns their compiles into loads.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import warp as wp
 
 from . import kernels
 from .kernels import warp_modules
-from .kernels.regular import fold_padded_forces_kernel, regular_forces_kernel
+from .kernels.regular import fold_padded_forces_kernel, regular_forces_kernel, regular_volume_kernel
 from .patches import regular_patch_basis
 
 RULES = ("3", "3x4")  # the scenes' quadrature rules (walkers and quick runs "3"; cube and prism wave guides "3x4")
@@ -48,7 +48,9 @@ def precompile(archs, modules=None, report=print) -> list:
 
 
 def regular_kernels(rules=RULES) -> list:
-    """The regular-patch force kernels a Shell of these rules launches by default (float32, held positions, with
-    vector atomics and without)."""
-    return [regular_forces_kernel(*regular_patch_basis(rule), wp.float32, True, vector)
-            for rule in rules for vector in (True, False)]  # fmt: skip
+    """The regular-patch kernels a Shell of these rules launches by default (float32): forces holding positions, with
+    vector atomics and without, and the volume moments."""
+    return [kernel for rule in rules for kernel in (
+        regular_forces_kernel(*regular_patch_basis(rule), wp.float32, True, True),
+        regular_forces_kernel(*regular_patch_basis(rule), wp.float32, True, False),
+        regular_volume_kernel(*regular_patch_basis(rule), wp.float32))]  # fmt: skip

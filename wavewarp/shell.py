@@ -26,7 +26,7 @@ from .kernels import register_capped
 from .kernels.adjoint import eval_shell_rates
 from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
-from .kernels.regular import fold_padded_forces_kernel, regular_forces_kernel
+from .kernels.regular import fold_padded_forces_kernel, regular_forces_kernel, regular_volume_kernel
 from .kernels.staged import staged_shell_forces_kernel
 from .kernels.shell import (
     FORCE_BLOCK,
@@ -141,7 +141,8 @@ class Shell:
     is for float32 on CUDA "vector" from `VECTOR_FROM_TRIANGLES` triangles (all worlds) on sm_90 and later,
     "held" from `HELD_FROM_TRIANGLES` before, and "general" otherwise (the split's extra launches cost more
     than they save on small shells; the CPU and float64 gain nothing). The choice concerns the atomic scatter
-    only (not the staged or deterministic kernels).
+    (not the staged or deterministic kernels) and, any but "general", the volume moments (one triangle an item,
+    regular ones from literals: `regular_volume_kernel`).
 
     Batched worlds: on a `Mesh.union`, thickness, young, AC, AI, volume_penalty and bilayer_radius
     take one value per world (or one for all); ν is shared. Worlds never interact.
@@ -237,6 +238,8 @@ class Shell:
         self._force_launches = self._force_kernel_launches(self.regular_kernel)
         self._padded_forces = (wp.zeros(mesh.n_vertices, dtype=wp.vec4f, device=self.device)
                                if self.regular_kernel == "vector" else None)  # the vector atomics' accumulator
+        self._volume_kernel = (volume_kernel if self.regular_kernel == "general"
+                               else regular_volume_kernel(*regular_patch_basis(self.rule), self.scalar))  # fmt: skip
         self._listeners = []  # weak references to the solvers' notify_model_changed (captured graphs to drop)
         self.rest_volume = self._volume_of(self.tables.positions())
         lengths = np.linalg.norm(np.diff(mesh.vertices[mesh.edges], axis=1)[:, 0], axis=1)
@@ -396,9 +399,12 @@ class Shell:
             self._sum(self._moment_terms, self._moments, differentiable)
             return
         self._moments.zero_()
-        items = n // self.worlds
+        if self._volume_kernel is volume_kernel:
+            items = n // self.worlds  # one point or vertex an item
+        else:  # one triangle or vertex an item
+            items = max(self.mesh.n_triangles, self.mesh.n_vertices) // self.worlds
         threads = reduction_threads(items, self.deterministic)  # per world: no block straddles two worlds
-        wp.launch(volume_kernel, dim=threads * self.worlds, inputs=patch + [self.worlds, items, threads],
+        wp.launch(self._volume_kernel, dim=threads * self.worlds, inputs=patch + [self.worlds, items, threads],
                   outputs=[self._moments], block_dim=REDUCTION_BLOCK, device=self.device)  # fmt: skip
 
     def _elastic_inputs(self, x: wp.array, moduli=None) -> list:
