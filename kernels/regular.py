@@ -175,7 +175,10 @@ def regular_volume_kernel(basis: tuple, weights: tuple, scalar):
         xi = wp.vec3d()
         for i in range(wp.tid() - w * threads, items, threads):
             t = w * triangles + i
-            if i < triangles and triangle_type[t] == 0:
+            regular = False
+            if i < triangles:
+                regular = triangle_type[t] == 0
+            if regular:
                 start = patch_start[t]
                 origin = x[patch_vertices[start]]
                 held = wp.matrix(shape=(REGULAR_PATCH, 3), dtype=scalar)
@@ -193,7 +196,7 @@ def regular_volume_kernel(basis: tuple, weights: tuple, scalar):
                     a = wp.vec3d(wp.cross(x1, x2)) * wp.static(wp.float64(third_weights[point]))
                     area_normal += a
                     moment += wp.dot(wp.vec3d(p + origin), a)
-            elif i < triangles:
+            elif i < triangles:  # a patch of another valence: the table
                 for point in range(points_per_triangle):
                     u, row = basis_row(triangle_type, points_per_triangle, t * points_per_triangle + point)
                     p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis_table, u, row)
