@@ -22,9 +22,15 @@ import functools
 
 import warp as wp
 
-from .limit_surface import basis_row, patch_jet
 from .reduce import block_add
-from .shell import FORCE_BLOCK, VolumeMoments, jet_strains, strains_gradient_jet, world_volume_terms
+from .shell import (
+    FORCE_BLOCK,
+    VolumeMoments,
+    jet_strains,
+    point_volume_moments,
+    strains_gradient_jet,
+    world_volume_terms,
+)
 
 REGULAR_PATCH = 12  # control vertices of a regular patch
 
@@ -198,11 +204,10 @@ def regular_volume_kernel(basis: tuple, weights: tuple, scalar):
                     moment += wp.dot(wp.vec3d(p + origin), a)
             elif i < triangles:  # a patch of another valence: the table
                 for point in range(points_per_triangle):
-                    u, row = basis_row(triangle_type, points_per_triangle, t * points_per_triangle + point)
-                    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis_table, u, row)
-                    a = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights_table[point]) / wp.float64(3.0))
+                    a, m = point_volume_moments(x, patch_start, patch_vertices, triangle_type, basis_table,
+                                                weights_table, points_per_triangle, t * points_per_triangle + point)
                     area_normal += a
-                    moment += wp.dot(wp.vec3d(p), a)
+                    moment += m
             if i < vertices:
                 xi += wp.vec3d(x[w * vertices + i])
         total = VolumeMoments(area_normal[0], area_normal[1], area_normal[2], moment, xi[0], xi[1], xi[2])

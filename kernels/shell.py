@@ -417,6 +417,24 @@ def world_volume_terms(x: wp.array(dtype=Any), moments: wp.array(dtype=VolumeMom
 
 
 @wp.func
+def point_volume_moments(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    q: int,
+):
+    """Quadrature point q's terms of S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω (float64), its jet from the table."""
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
+    return area_normal, wp.dot(wp.vec3d(p), area_normal)
+
+
+@wp.func
 def volume_item(
     x: wp.array(dtype=Any),
     patch_start: wp.array(dtype=wp.int32),
@@ -437,11 +455,8 @@ def volume_item(
     points = triangle_type.shape[0] * points_per_triangle // worlds
     vertices = x.shape[0] // worlds
     if i < points:
-        q = w * points + i
-        t, row = basis_row(triangle_type, points_per_triangle, q)
-        p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
-        area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
-        moment = wp.dot(wp.vec3d(p), area_normal)
+        area_normal, moment = point_volume_moments(x, patch_start, patch_vertices, triangle_type, basis, weights,
+                                                   points_per_triangle, w * points + i)  # fmt: skip
     if i < vertices:
         xi = wp.vec3d(x[w * vertices + i])
     return area_normal, moment, xi
