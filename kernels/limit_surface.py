@@ -57,6 +57,24 @@ def patch_jet(
 
 
 @wp.func
+def point_volume_moments(
+    x: wp.array(dtype=Any),
+    patch_start: wp.array(dtype=wp.int32),
+    patch_vertices: wp.array(dtype=wp.int32),
+    triangle_type: wp.array(dtype=wp.int32),
+    basis: wp.array2d(dtype=Any),
+    weights: wp.array(dtype=Any),
+    points_per_triangle: int,
+    q: int,
+):
+    """Quadrature point q's terms of S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω (float64), its jet from the table."""
+    t, row = basis_row(triangle_type, points_per_triangle, q)
+    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
+    area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
+    return area_normal, wp.dot(wp.vec3d(p), area_normal)
+
+
+@wp.func
 def first_form(x1: Any, x2: Any):
     """Metric a_αβ = a_α·a_β."""
     a12 = wp.dot(x1, x2)

@@ -22,15 +22,9 @@ import functools
 
 import warp as wp
 
+from .limit_surface import point_volume_moments
 from .reduce import block_add
-from .shell import (
-    FORCE_BLOCK,
-    VolumeMoments,
-    jet_strains,
-    point_volume_moments,
-    strains_gradient_jet,
-    world_volume_terms,
-)
+from .shell import FORCE_BLOCK, VolumeMoments, jet_strains, strains_gradient_jet, world_volume_terms
 
 REGULAR_PATCH = 12  # control vertices of a regular patch
 

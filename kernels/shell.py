@@ -19,7 +19,15 @@ from typing import Any
 import warp as wp
 
 from . import declare_overloads
-from .limit_surface import basis_row, entry_point, first_form, patch_jet, patch_scalar, second_form
+from .limit_surface import (
+    basis_row,
+    entry_point,
+    first_form,
+    patch_jet,
+    patch_scalar,
+    point_volume_moments,
+    second_form,
+)
 from .reduce import block_add
 
 MAX_PATCH = wp.constant(18)  # control vertices of a patch (valence N + 6): vertices of valence up to 12
@@ -414,24 +422,6 @@ def world_volume_terms(x: wp.array(dtype=Any), moments: wp.array(dtype=VolumeMom
     vertices = x.shape[0] // worlds
     centroid = type(x[0])(moments_centroid(moments[w], vertices))
     return centroid, volume_pressure(moments[w], vertices, target[w], penalty[w])
-
-
-@wp.func
-def point_volume_moments(
-    x: wp.array(dtype=Any),
-    patch_start: wp.array(dtype=wp.int32),
-    patch_vertices: wp.array(dtype=wp.int32),
-    triangle_type: wp.array(dtype=wp.int32),
-    basis: wp.array2d(dtype=Any),
-    weights: wp.array(dtype=Any),
-    points_per_triangle: int,
-    q: int,
-):
-    """Quadrature point q's terms of S = ⅓ ∫ n dω and V₀ = ⅓ ∫ x·n dω (float64), its jet from the table."""
-    t, row = basis_row(triangle_type, points_per_triangle, q)
-    p, x1, x2, x11, x12, x22 = patch_jet(x, patch_start, patch_vertices, basis, t, row)
-    area_normal = wp.vec3d(wp.cross(x1, x2)) * (wp.float64(weights[q % points_per_triangle]) / wp.float64(3.0))
-    return area_normal, wp.dot(wp.vec3d(p), area_normal)
 
 
 @wp.func
