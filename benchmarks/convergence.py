@@ -30,7 +30,7 @@ import os
 import time
 from datetime import date
 
-from wavewarp.benchmarks.convergence_tables import markdown_row, profile_convergence, richardson
+from wavewarp.benchmarks.convergence_tables import default_errors, markdown_row, profile_convergence, richardson
 
 READINGS = ("conservative/quasi-static", "conservative/overdamped", "material/quasi-static", "material/overdamped")
 OOCYTE_OBSERVABLES = (
@@ -236,8 +236,51 @@ def _sequence(runs: list, names, labels: list) -> dict:
     return seq
 
 
-def markdown(table: dict, header: str) -> str:
+def defaults(results: list) -> dict:
+    """Per oocyte scene whose default reading has points: its default's headline observables against the converged
+    estimates (convergence_tables.default_errors)."""
+    from wavewarp.parameters import load_scene
+
+    out = {}
+    for scene in sorted({r["scene"] for r in results} - {"buckling"}):
+        p = load_scene(scene).Parameters()
+        reading, sets = f"{p.transport}/{p.coupling}", [f"tau_m={p.tau_m:g}"] if p.coupling == "overdamped" else []
+        members = {
+            (r["level"], r["k"]): r["measurements"]
+            for r in results
+            if r["scene"] == scene
+            and r["reading"] == reading
+            and r["sets"] == sets
+            and not (r["stopped"] or r.get("interrupted"))
+        }
+        if members:
+            out[scene] = {
+                "reading": reading,
+                "sets": sets,
+                "level": p.level,
+                "observables": default_errors(members, p.level),
+            }
+    return out
+
+
+def markdown(table: dict, header: str, checked: dict) -> str:
     lines = [header, ""]
+    for scene, entry in checked.items():
+        lines += [
+            f"## {scene}'s default ({entry['reading']} {' '.join(entry['sets'])}, level {entry['level']}, its dt) "
+            "against the converged values",
+            "",
+            "| observable | default | converged ± error (levels, step) | tolerance | within |",
+            "|---|---|---|---|---|",
+        ]
+        for name, e in entry["observables"].items():
+            where = f"L{e['levels'][0]}–L{e['levels'][-1]}, k{e['k_ref']}"
+            tolerance = f"{e['tolerance']:g}" + (" rel." if e["kind"] == "relative" else "")
+            lines.append(
+                f"| {name} | {e['default']:.4g} | {e['estimate']:.4g} ± {e['error']:.2g} ({where}) | "
+                f"{tolerance} | {e['meets']} |"
+            )
+        lines.append("")
     for group, entry in table.items():
         for kind, sequences in (("time step", entry["time_step"]), ("mesh", entry["mesh"])):
             for label, seq in sequences.items():
@@ -296,7 +339,7 @@ def chart(table: dict, path: str) -> None:
 def main(argv=None) -> int:
     import warp as wp
 
-    from wavewarp.device import describe_device, resolve_device
+    from wavewarp.device import resolve_device
     from wavewarp.io import write_json
 
     parser = argparse.ArgumentParser(prog="wavewarp bench convergence", description=__doc__.split("\n")[0])
@@ -371,13 +414,21 @@ def main(argv=None) -> int:
         json.load(open(os.path.join(folder, name))) for name in sorted(os.listdir(folder)) if name.endswith(".json")
     ]
     table = tables(results)
-    header = f"# Convergence tables ({describe_device(device)['device']}, {date.today().isoformat()})"
+    devices = sorted({r["device"] for r in results})
+    header = f"# Convergence tables (points run on {', '.join(devices)}; tables of {date.today().isoformat()})"
+    checked = defaults(results)
     write_json(
         os.path.join(args.out, "convergence.json"),
-        {"benchmark": "convergence", **describe_device(device), "date": date.today().isoformat(), "tables": table},
+        {
+            "benchmark": "convergence",
+            "devices": devices,
+            "date": date.today().isoformat(),
+            "defaults": checked,
+            "tables": table,
+        },
     )
     with open(os.path.join(args.out, "convergence.md"), "w") as f:
-        f.write(markdown(table, header))
+        f.write(markdown(table, header, checked))
     chart(table, os.path.join(args.out, "convergence.png"))
     print(f"wrote {args.out}/convergence.json, convergence.md, convergence.png ({len(results)} points)")
     return 0

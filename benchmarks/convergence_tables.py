@@ -77,3 +77,68 @@ def markdown_row(name: str, result: dict, digits: int = 4) -> str:
 def _number(value, digits: int) -> str:
     value = float(value)
     return f"{value:.{digits}g}" if value != 0 else "0"
+
+
+# the oocytes' headline observables and how close the default must come to the converged value: (tolerance, kind, why)
+HEADLINE = {
+    "wave_speed": (0.02, "relative", "2% of the front speed"),
+    "speed_nonlinearity": (0.005, "absolute", "0.5% of the crossing time: the constant-speed claim's margin"),
+    "arrival_spread": (0.1, "absolute", "a tenth of a ring's crossing time (a ring reads axisymmetric below 0.5)"),
+    "shape_asymmetry": (0.002, "absolute", "0.2% of R: the axisymmetry claim's margin (asymmetric above 1% R)"),
+    "min_concentration_expanding": (0.02, "absolute", "2% of the pulse's peak C0 = 1"),
+    "min_area_ratio": (0.02, "relative", "2% of the smallest area ratio (the fold is at 1/e)"),
+    "contraction_depth": (0.02, "relative", "2% of the deepest contraction"),
+}
+
+
+def converged_value(members: dict, name: str) -> dict | None:
+    """The converged estimate of one observable from one reading's points {(level, k): measurements}: Richardson
+    over the levels at the step k_ref with the most levels, corrected for that step's error by Richardson over
+    the steps at the finest level that ran k_ref. Errors add."""
+
+    def value(level, k):
+        v = members.get((level, k), {}).get(name)
+        return None if v is None else float(v)
+
+    steps = {k for _, k in members}
+    k_ref = max(steps, key=lambda k: (sum(value(lv, k) is not None for lv, kk in members if kk == k), k), default=None)
+    if k_ref is None:
+        return None
+    levels = sorted(lv for lv, k in members if k == k_ref and value(lv, k) is not None)
+    if not levels:
+        return None
+    mesh = richardson([value(lv, k_ref) for lv in levels])
+    finest = levels[-1]
+    in_time = richardson([value(finest, k) for k in sorted(k for lv, k in members if lv == finest) if k >= k_ref])
+    correction = 0.0 if in_time["estimate"] is None else in_time["estimate"] - value(finest, k_ref)
+    error = (mesh["error"] or 0.0) + (in_time["error"] or 0.0)
+    return {
+        "estimate": mesh["estimate"] + correction,
+        "error": error,
+        "levels": levels,
+        "k_ref": k_ref,
+        "mesh_order": mesh["order"],
+        "time_order": in_time["order"],
+        "asymptotic": bool(mesh["asymptotic"] and (in_time["asymptotic"] or in_time["error"] == 0.0)),
+    }
+
+
+def default_errors(members: dict, level: int, k: int = 0) -> dict:
+    """For each HEADLINE observable: the default's value (level, k), the converged estimate and error, the
+    tolerance and whether the default lies within it (its distance plus the estimate's error)."""
+    out = {}
+    for name, (tolerance, kind, why) in HEADLINE.items():
+        default = members.get((level, k), {}).get(name)
+        best = converged_value(members, name)
+        if default is None or best is None:
+            continue
+        scale = abs(best["estimate"]) if kind == "relative" else 1.0
+        out[name] = {
+            "default": float(default),
+            **best,
+            "tolerance": tolerance,
+            "kind": kind,
+            "why": why,
+            "meets": within(default, best["estimate"], best["error"], tolerance, scale),
+        }
+    return out

@@ -12,9 +12,10 @@ from wavewarp.gradients import GradientError, scene_gradient
 from wavewarp.mesh import Mesh
 from wavewarp.parameters import load_scene, resolve
 
-# a starfish at level 2 whose wave runs on the rest shell, relaxed by Newton steps to a residual strain of 1e-11
+# a quasi-static starfish at level 2 whose wave runs on the rest shell, relaxed by Newton steps to a residual strain
+# of 1e-11
 SETTINGS = ["level=2", "t_end=3", "frames=1", "sensitive=false", "dtype=float64", "relax_method=newton",
-            "relax_tol=1e-11", "newton_steps=60"]  # fmt: skip
+            "relax_tol=1e-11", "newton_steps=60", "coupling=quasi-static"]  # fmt: skip
 
 
 def starfish(**changes):
@@ -150,6 +151,7 @@ def test_grad_command_prints_the_objective_and_its_gradient(capsys):
         (["starfish", "--quick", "--set", "sensitive=false", "--points", "5,99999"], "between 0 and 641"),
         (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "AC", "--objective", "distance:3,3"],
          "two different control points"),
+        (["starfish", "--quick", "--set", "sensitive=false", "--wrt", "AC"], "--set coupling=quasi-static"),
     ],
 )
 def test_grad_refuses_what_it_cannot_differentiate_and_names_the_fix(argv, message, capsys):

@@ -69,15 +69,3 @@ class Drag:
         eval_drag(self.points, self.anchors, self.area, self.coefficient, with_energy, self.pressures, density)
         if forces is not None:
             spread_quadrature_forces(shell.tables, self.pressures, self.area, forces, shell.deterministic)
-
-    def twin(self, shell) -> Drag:
-        """The same drag on `shell` (the float64 twin of a Newton finish); `share` gives it this step's state."""
-        twin = Drag(shell, drag=self.drag)
-        self.share(twin)
-        return twin
-
-    def share(self, twin: Drag) -> None:
-        """Give `twin` this term's coefficient and anchors (converted to its dtype)."""
-        twin.interval = self.interval
-        twin.coefficient.assign(self.coefficient.numpy().astype(twin.shell._real))
-        twin.anchors.assign(self.anchors.numpy().astype(twin.shell._real))

@@ -168,6 +168,9 @@ def check_differentiable(run, wrt, objective: str = "height", points=()) -> None
     if objective not in OBJECTIVES[:2]:
         distance_points(objective, run.mesh.n_vertices)
     control_points(points, run.mesh.n_vertices)
+    if getattr(run.p, "coupling", "quasi-static") != "quasi-static":
+        raise GradientError("the overdamped shell's last position depends on the path that led to it, not on the "
+                            "last concentrations alone: --set coupling=quasi-static (the equilibrium's gradient)")
     if len(points) and run.dt_changes:
         raise GradientError("the shape gradient replays the run's wave on each moved rest shape with the run's "
                             "steps, and this run changed its step on the way: --set adaptive_dt=false or a smaller "
