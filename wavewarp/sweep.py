@@ -7,7 +7,10 @@ cluster with one worker per GPU, or per CPU core.
 
 Every point's result is written atomically to DIR/points/POINT.json as soon as it is computed,
 so a killed sweep loses only the points being computed; running the same sweep into the same
-DIR again computes only the points without a result. With `h5` each point's trajectory
+DIR again computes only the points without a result, and those whose result is a failure. A point
+is locked while it is computed (DIR/points/.POINT.json.lock): two sweeps into one DIR compute each
+point once. A batch whose worker died (Dask retries it on another first) or whose task raised
+fails its points alone: the sweep goes on, and reports them. With `h5` each point's trajectory
 (DIR/points/POINT.h5) is durable frame by frame and records the batch it ran in: the batches a
 killed sweep left part-way are run again as they were and go on from their worlds' last common
 frame. At the end the sweep writes DIR/table.csv (a row per point) and DIR/chart.png (a
@@ -45,6 +48,7 @@ from .device import init_warp, set_deterministic
 from .driver import FAILURES, simulate
 from .figures import sweep_chart_png
 from .io import atomic_path, write_json
+from .locks import OutputBusy, output_lock
 from .parameters import SceneError, fields, load_scene, resolve
 from .trajectory import TrajectoryWriter, complete_frames, read_frames
 
@@ -251,15 +255,43 @@ def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     return results
 
 
+def has_result(out: str, point: Point) -> bool:
+    """Whether `point` has a result that is no failure (a failed point is run again)."""
+    try:
+        with open(result_path(out, point)) as f:
+            return json.load(f).get("status") != "failed"
+    except (OSError, ValueError):
+        return False
+
+
+def skipped(point: Point, reason: str) -> dict:
+    """What a batch reports of a point it left to another sweep (nothing is written)."""
+    return {"point": point.name, "values": dict(point.values), "seed": point.seed, "status": "skipped",
+            "reason": reason}
+
+
 def run_batch(spec: SweepSpec, points, out: str) -> list:
     """The points of one batch in this worker (each result written as it comes): one batched run where
-    the scene has batched worlds, else one point after another."""
+    the scene has batched worlds, else one point after another. Each point is locked while it runs; a
+    point another sweep holds, or has computed meanwhile, is skipped (reported, "skipped")."""
     wp.config.log_level = wp.LOG_WARNING
     set_deterministic(spec.deterministic)
     module = load_scene(spec.scene)
-    if len(points) > 1 and hasattr(module, "build_batch"):
-        return run_worlds(spec, module, points, out)
-    return [run_point(spec, point, out) for point in points]
+    with contextlib.ExitStack() as stack:
+        mine, left = [], []
+        for point in points:
+            try:
+                stack.enter_context(output_lock(result_path(out, point), "point"))
+            except OutputBusy:
+                left.append(skipped(point, "another sweep into this folder is computing it"))
+                continue
+            if has_result(out, point):
+                left.append(skipped(point, "another sweep into this folder computed it"))
+            else:
+                mine.append(point)
+        if len(mine) > 1 and hasattr(module, "build_batch"):
+            return run_worlds(spec, module, mine, out) + left
+        return [run_point(spec, point, out) for point in mine] + left
 
 
 def world_group(spec: SweepSpec):
@@ -408,17 +440,35 @@ def write_table(rows, path) -> None:
         writer.writerows(rows)
 
 
+class SweepTable(list):
+    """The table's rows (one dict per point with a result), and what this sweep did: `computed` (points it
+    ran to a result, "done" or "stopped"), `skipped` (points with a result before it, or left to another
+    sweep into the folder) and `failures` (point -> error: points that failed; a re-run tries them again)."""
+
+    def __init__(self, rows, computed: int = 0, skipped: int = 0, failures: dict | None = None):
+        super().__init__(rows)
+        self.computed, self.skipped, self.failures = computed, skipped, dict(failures or {})
+
+    def summary(self) -> dict:
+        """{"computed", "skipped", "failed"} (counts) and the `failures` by point."""
+        return {"computed": self.computed, "skipped": self.skipped, "failed": len(self.failures),
+                "failures": self.failures}
+
+
 def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | None = None, batch: int = 1,
-          workers: int | None = None, scheduler: str | None = None, progress: bool = False, report=print) -> list:  # fmt: skip
-    """Run every point of `spec` without a result in `out` (batches of `batch` points on `executor`;
-    None: a Dask client of `scheduler`, or of a local cluster), then write DIR/table.csv and
-    DIR/chart.png. Returns the rows of the table (one dict per point)."""
+          workers: int | None = None, scheduler: str | None = None, progress: bool = False,
+          report=print) -> SweepTable:
+    """Run every point of `spec` without a result in `out`, or whose result is a failure (batches of `batch`
+    points on `executor`; None: a Dask client of `scheduler`, or of a local cluster), then write
+    DIR/table.csv and DIR/chart.png. A batch whose worker died or whose task raised fails its points (their
+    results say why) and the others go on. Returns the table's rows with what this sweep did (SweepTable)."""
     points = grid_points(spec)
     check_points(spec, points)
     group = world_group(spec)
     prepare_folder(spec, out)
-    missing = [p for p in points if not os.path.isfile(result_path(out, p))]
+    missing = [p for p in points if not has_result(out, p)]
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
+    results = []
     if missing:
         with _executor(executor, spec, workers, scheduler, report) as pool:
             started, fresh = started_batches(out, missing) if spec.h5 else ([], missing)
@@ -426,26 +476,41 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
                 report(f"{len(started)} batch(es) of a killed sweep go on from their trajectories' frames")
             planned = started + batches(fresh, batch, group)
             work = {pool.submit(run_batch, spec, points, out): points for points in planned}
-            bar, died = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress), []
+            bar = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress)
             for future in concurrent.futures.as_completed(work):
                 try:
-                    bar.update(len(future.result()))
-                except KilledWorker as error:
-                    died.append((work[future], error))
+                    done = future.result()
+                except Exception as error:  # the batch's worker died (Dask's KilledWorker) or its task raised
+                    done = lost_batch(spec, work[future], out, error)
+                results += done
+                bar.update(len(done))
             bar.close()
-            if died:
-                raise workers_died(died, out) from died[0][1]
     rows = table_rows(out, points)
     write_table(rows, os.path.join(out, "table.csv"))
     sweep_chart_png(rows, list(spec.grid), spec.measure, os.path.join(out, "chart.png"), title=spec.scene)
-    return rows
+    left = sum(result["status"] == "skipped" for result in results)
+    failures = {result["point"]: result.get("error", "") for result in results if result["status"] == "failed"}
+    return SweepTable(rows, computed=len(results) - left - len(failures), skipped=len(points) - len(missing) + left,
+                      failures=failures)
 
 
-def workers_died(died: list, out: str) -> RuntimeError:
-    """The sweep's error for the batches (their points, Dask's error) whose worker process died."""
-    names = "; ".join(f"{points[0].name} … {points[-1].name}" for points, _ in died)
-    return RuntimeError(
-        f"{len(died)} batch(es) ({names}) lost their worker every time they were tried: its process was stopped by "
-        "Dask's memory monitor (at 95% of the worker's memory limit) or crashed in native code. Every other point is "
-        f"kept in {os.path.join(out, 'points')}: run the same sweep again to compute only the rest, with a smaller "
-        "--batch (fewer worlds per run) or fewer workers per machine")
+def lost_batch(spec: SweepSpec, points, out: str, error: Exception) -> list:
+    """The results of a batch whose task ended in `error`: those its points wrote before it, and for the
+    others a failure written (a re-run tries them again) that says why."""
+    if isinstance(error, KilledWorker):
+        why = ("its worker process died every time the batch was tried: stopped by Dask's memory monitor (at 95% "
+               "of the worker's memory limit) or crashed in native code; run the sweep again, with a smaller --batch "
+               "(fewer worlds per run) or fewer workers per machine")
+    else:
+        why = f"its batch raised {type(error).__name__}: {error}"
+    results = []
+    for point in points:
+        if has_result(out, point):
+            with open(result_path(out, point)) as f:
+                results.append(json.load(f))
+            continue
+        result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
+                  "status": "failed", "error": " ".join(why.split()), "wall_time_s": 0.0}
+        write_json(result_path(out, point), result)
+        results.append(result)
+    return results
