@@ -3,15 +3,11 @@ and 4): a resume continues only the run its trajectory holds (seed, mesh, rest s
 hold, and gives the uninterrupted run's file bit for bit, its times and measurements included; a finished run's
 file is never rewritten."""
 
-import hashlib
 import json
-import os
-import shutil
 
 import h5py
-import numpy as np
+from trajectories import assert_refused, assert_same_trajectory, file_state, killed_copy, run_cli
 
-from wavewarp.cli import main
 from wavewarp.mesh import icosphere, save
 
 # cube-waves on 4 divisions to the scene's own end: 3 relaxations a frame, and the arrival-time measurements
@@ -19,46 +15,6 @@ from wavewarp.mesh import icosphere, save
 CUBE = ["cube-waves", "--quick", "--device", "cpu", "--set", "t_end=auto", "--set", "frames=6"]
 # a starfish whose rest shape the seed perturbs
 NOISY = ["starfish", "--quick", "--device", "cpu", "--set", "level=2", "--set", "frames=2", "--set", "noise=1e-3"]
-
-
-def run_cli(capsys, *args):
-    code = main(["run", *args])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def assert_refused(code, err, *phrases):
-    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
-    assert all(phrase in err for phrase in phrases), err
-
-
-def file_state(path) -> tuple:
-    """The file's bytes (digest) and modification time: what a rewrite would change."""
-    return hashlib.sha256(open(path, "rb").read()).hexdigest(), os.stat(path).st_mtime_ns
-
-
-def killed_copy(full, part, keep: int) -> None:
-    """`part`: `full` as a run killed after its first `keep` frames would have left it (no measurements yet)."""
-    shutil.copyfile(full, part)
-    with h5py.File(part, "r+") as f:
-        for name in f["frames"]:
-            f["frames"][name].resize((keep, *f["frames"][name].shape[1:]))
-        f["frames"].attrs["complete"] = keep
-        measured = json.loads(f.attrs["measurements"])
-        for name in ["measurements", *measured]:
-            if name in f.attrs:
-                del f.attrs[name]
-
-
-def assert_same_trajectory(expected, actual) -> None:
-    """Every dataset equal bit for bit, and every root attribute (but the resume's own record, `resumed_by`)."""
-    with h5py.File(expected, "r") as a, h5py.File(actual, "r") as b:
-        names = []
-        a.visit(lambda name: names.append(name) if isinstance(a[name], h5py.Dataset) else None)
-        assert names and all(name in b for name in names)
-        for name in names:
-            np.testing.assert_array_equal(b[name][...], a[name][...], err_msg=name)
-        assert {k: str(v) for k, v in b.attrs.items() if k != "resumed_by"} == {k: str(v) for k, v in a.attrs.items()}
 
 
 def test_a_resumed_run_equals_the_uninterrupted_run_bit_for_bit(tmp_path, capsys):

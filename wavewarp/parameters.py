@@ -141,6 +141,8 @@ def _scene_script(path: str):
     try:
         spec.loader.exec_module(module)
     except SyntaxError as error:
+        if error.lineno is None:  # null bytes: a binary file
+            raise SceneError(f"scene script {path!r} is not a Python text file ({error.msg})") from None
         raise SceneError(f"scene script {path!r} is not valid Python: {error.msg} (line {error.lineno})") from None
     except ValueError as error:  # e.g. null bytes or bytes that are no UTF-8: a binary file
         raise SceneError(f"scene script {path!r} is not a Python text file ({error})") from None
