@@ -318,6 +318,8 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                       help="also keep every point's trajectory (DIR/points/*.h5), frame by frame: a batch killed "
                       "part-way goes on from its last stored frame when the sweep is run again")  # fmt: skip
     grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
+    grid.add_argument("--json", action="store_true",
+                      help='print one JSON object: {"computed", "skipped", "failed"} (counts) and "failures"')
     _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)
     grad = commands.add_parser("grad", help="gradient of a scene's objective with respect to shell parameters: a "

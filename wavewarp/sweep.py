@@ -35,6 +35,7 @@ import re
 import shutil
 import tempfile
 import time
+import uuid
 from dataclasses import dataclass, field, replace
 
 import h5py
@@ -51,6 +52,7 @@ from .io import atomic_path, write_json
 from .locks import OutputBusy, output_lock
 from .parameters import SceneError, fields, load_scene, resolve
 from .trajectory import TrajectoryWriter, complete_frames, read_frames
+from .version import __version__
 
 BATCH_ATTRIBUTE = "sweep_batch"  # a point's trajectory: the names of the points of the batch it ran in (JSON)
 
@@ -62,7 +64,8 @@ class SweepSpec:
     seeds to an ensemble), `fixed` NAME=VALUE settings for every point, `quick` (the
     scene's reduced run), `device` ("cpu", "cuda" or None: the worker's choice), `h5` (a trajectory
     per point), `measure`, the measurement the chart shows (None: the first that differs between
-    points), and `deterministic` (bit-exact repeated runs on a GPU: wavewarp.device.set_deterministic)."""
+    points), `deterministic` (bit-exact repeated runs on a GPU: wavewarp.device.set_deterministic), and
+    `invocation`, the id `sweep` gives one sweep's run (each result it writes records it)."""
 
     scene: str
     grid: dict = field(default_factory=dict)
@@ -74,6 +77,7 @@ class SweepSpec:
     h5: bool = False
     measure: str | None = None
     deterministic: bool = False
+    invocation: str = ""
 
     def definition(self) -> dict:
         """What identifies the sweep's points and results (not where they run); first_seed only where it
@@ -154,9 +158,11 @@ def trajectory_path(out: str, point: Point) -> str:
 
 def stored_batch(path: str) -> tuple:
     """The batch a point's trajectory ran in (its points' names) and the frames it holds; ([], 0) where
-    there is no trajectory to continue."""
+    there is no trajectory to continue (also one another wavewarp version wrote: a resume would refuse it)."""
     try:
         with h5py.File(path, "r") as f:
+            if f.attrs.get("wavewarp_version") != __version__:
+                return [], 0
             return json.loads(f.attrs.get(BATCH_ATTRIBUTE, "[]")), complete_frames(f)
     except (OSError, KeyError, ValueError):
         return [], 0
@@ -189,7 +195,8 @@ def point_writer(out: str, points, w: int, *, mesh, series, scene: str, paramete
     return TrajectoryWriter(trajectory_path(out, points[w]), triangles=mesh.triangles, rest_positions=mesh.vertices,
                             series=series, scene=scene, parameters=parameters, device=device,
                             resume=resume_frames > 0, resume_frames=resume_frames or None,
-                            attributes={BATCH_ATTRIBUTE: json.dumps([point.name for point in points])})  # fmt: skip
+                            attributes={BATCH_ATTRIBUTE: json.dumps([point.name for point in points])},
+                            provenance={"seed": points[w].seed})  # fmt: skip
 
 
 def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
@@ -198,7 +205,8 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
     building the run is a result too ("failed", with the message)."""
     module = load_scene(spec.scene)
     p = point_parameters(module, spec, point)
-    result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition()}
+    result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
+              "invocation": spec.invocation}
     reports, start = [], time.perf_counter()
     try:
         run = module.build(p, device=spec.device, seed=point.seed, report=reports.append)
@@ -230,7 +238,8 @@ def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     with `batch` {worlds, world}. A batch whose trajectories hold its frames so far (a killed sweep's)
     goes on from the last frame they share (`batch` then also says after how many frames)."""
     results = [{"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
-                "batch": {"worlds": len(points), "world": w}} for w, point in enumerate(points)]  # fmt: skip
+                "invocation": spec.invocation, "batch": {"worlds": len(points), "world": w}}
+               for w, point in enumerate(points)]
     reports, start = [], time.perf_counter()
     try:
         run = module.build_batch([point_parameters(module, spec, point) for point in points],
@@ -257,11 +266,8 @@ def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
 
 def has_result(out: str, point: Point) -> bool:
     """Whether `point` has a result that is no failure (a failed point is run again)."""
-    try:
-        with open(result_path(out, point)) as f:
-            return json.load(f).get("status") != "failed"
-    except (OSError, ValueError):
-        return False
+    result = stored_result(out, point)
+    return result is not None and result.get("status") != "failed"
 
 
 def skipped(point: Point, reason: str) -> dict:
@@ -462,13 +468,13 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
     points on `executor`; None: a Dask client of `scheduler`, or of a local cluster), then write
     DIR/table.csv and DIR/chart.png. A batch whose worker died or whose task raised fails its points (their
     results say why) and the others go on. Returns the table's rows with what this sweep did (SweepTable)."""
+    spec = replace(spec, invocation=uuid.uuid4().hex)
     points = grid_points(spec)
     check_points(spec, points)
     group = world_group(spec)
     prepare_folder(spec, out)
     missing = [p for p in points if not has_result(out, p)]
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
-    results = []
     if missing:
         with _executor(executor, spec, workers, scheduler, report) as pool:
             started, fresh = started_batches(out, missing) if spec.h5 else ([], missing)
@@ -479,38 +485,41 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
             bar = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress)
             for future in concurrent.futures.as_completed(work):
                 try:
-                    done = future.result()
+                    future.result()
                 except Exception as error:  # the batch's worker died (Dask's KilledWorker) or its task raised
-                    done = lost_batch(spec, work[future], out, error)
-                results += done
-                bar.update(len(done))
+                    lost_batch(spec, work[future], out, error)
+                bar.update(len(work[future]))
             bar.close()
     rows = table_rows(out, points)
     write_table(rows, os.path.join(out, "table.csv"))
     sweep_chart_png(rows, list(spec.grid), spec.measure, os.path.join(out, "chart.png"), title=spec.scene)
-    left = sum(result["status"] == "skipped" for result in results)
-    failures = {result["point"]: result.get("error", "") for result in results if result["status"] == "failed"}
-    return SweepTable(rows, computed=len(results) - left - len(failures), skipped=len(points) - len(missing) + left,
-                      failures=failures)
+    stored = [stored_result(out, point) for point in points]  # what this sweep wrote (a batch Dask ran twice, once)
+    ours = [result for result in stored if result is not None and result.get("invocation") == spec.invocation]
+    failures = {result["point"]: result.get("error", "") for result in ours if result["status"] == "failed"}
+    computed = len(ours) - len(failures)
+    return SweepTable(rows, computed=computed, skipped=len(points) - len(ours), failures=failures)
 
 
-def lost_batch(spec: SweepSpec, points, out: str, error: Exception) -> list:
-    """The results of a batch whose task ended in `error`: those its points wrote before it, and for the
-    others a failure written (a re-run tries them again) that says why."""
+def stored_result(out: str, point: Point) -> dict | None:
+    """The point's result in `out`, None where it has none (or an unreadable one)."""
+    try:
+        with open(result_path(out, point)) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def lost_batch(spec: SweepSpec, points, out: str, error: Exception) -> None:
+    """A batch whose task ended in `error`: each of its points without a result gets a failure that says why
+    (a re-run tries it again); those it finished before keep theirs."""
     if isinstance(error, KilledWorker):
         why = ("its worker process died every time the batch was tried: stopped by Dask's memory monitor (at 95% "
                "of the worker's memory limit) or crashed in native code; run the sweep again, with a smaller --batch "
                "(fewer worlds per run) or fewer workers per machine")
     else:
-        why = f"its batch raised {type(error).__name__}: {error}"
-    results = []
+        why = f"its batch raised {type(error).__name__}: {' '.join(str(error).split())}"
     for point in points:
-        if has_result(out, point):
-            with open(result_path(out, point)) as f:
-                results.append(json.load(f))
-            continue
-        result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
-                  "status": "failed", "error": " ".join(why.split()), "wall_time_s": 0.0}
-        write_json(result_path(out, point), result)
-        results.append(result)
-    return results
+        if not has_result(out, point):
+            write_json(result_path(out, point), {"point": point.name, "values": dict(point.values), "seed": point.seed,
+                                                 "sweep": spec.definition(), "invocation": spec.invocation,
+                                                 "status": "failed", "error": why, "wall_time_s": 0.0})
