@@ -487,6 +487,9 @@ def test_scene_defaults_are_the_accuracy_benchmarks_recommendation(scene):
     """Issue 7, docs/theory/scenes.md ("the coarsest resolution that meets its accuracy"): every default the accuracy
     benchmark sweeps is the committed full run's `scene_settings` (BENCHMARKS.md#accuracy-against-cost), but for
     the stated DEPARTURES: a new result or a changed default fails here until the other follows."""
+    if not os.path.isfile(ACCURACY):
+        pytest.skip(f"the committed accuracy result {os.path.normpath(ACCURACY)} is absent (wavewarp bench accuracy "
+                    "writes it)")
     with open(ACCURACY) as f:
         result = json.load(f)
     assert not result["quick"]
