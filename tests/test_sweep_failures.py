@@ -111,6 +111,7 @@ def test_two_sweeps_into_one_folder_compute_each_point_once(tmp_path):
         f"gamma={g}_seed=0.json" for g in ("0.8", "0.9", "1.0", "1.1")]
 
 
+@pytest.mark.slow
 def test_a_dask_worker_killed_mid_batch_costs_only_that_batch(tmp_path):
     """A local Dask cluster of one worker runs two batches; the worker dies (SIGKILL, as the OOM killer would)
     the first time it builds gamma=1.0: Dask runs that batch again on the restarted worker, the other batch

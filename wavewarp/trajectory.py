@@ -5,7 +5,9 @@ Schema: `/mesh/triangles` (T, 3), `/mesh/rest_positions` (V, 3); `/frames/time` 
 series a scene records (`velocities` (F, V, 3), `inhibitor` (F, V); the walkers' `reaction_amount`
 (F,), the amount the reaction has added, `first_arrival` (F, V), each vertex's first-front arrival,
 and `trace` (F, k, 8): time, c at the origin, the centre of mass and the origin vertex's position at
-the k chemistry steps up to each frame);
+the k chemistry steps up to each frame; the quasi-static scenes' `relaxation_count` (F,),
+`relaxation_times` (F, k) and `relaxation_concentration` (F, k, V), the arrival times' samples at the
+relaxations since the previous frame);
 root attributes `scene`, `parameters` (JSON), `wavewarp_version`, `device`, the provenance a resume
 checks (wavewarp/provenance.py: `seed`, `command_line`, `mesh_source`, `mesh_sha256`,
 `rest_positions_sha256`, `frames_planned`; a resume adds its command to `resumed_by`, JSON) (a sweep's
