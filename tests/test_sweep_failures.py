@@ -23,14 +23,16 @@ HANG_GUARD_S = 600  # waiting on other processes fails after this (a guard again
 def scene_script(folder, body: str) -> str:
     """A scene script: cube-waves whose `build` first runs `body` (with `p`, `log` = FOLDER/builds.log)."""
     path = folder / "scene.py"
-    path.write_text(textwrap.dedent(f"""
+    header = textwrap.dedent(f"""
         import os, signal
         from wavewarp.scenes import cube_waves
         from wavewarp.scenes.cube_waves import NAME, QUICK, Parameters
 
         def build(p, **options):
             log = {str(folder / "builds.log")!r}
-        """) + textwrap.indent(textwrap.dedent(body).strip() + "\n", "    ") + "    return cube_waves.build(p, **options)\n")
+        """)
+    path.write_text(header + textwrap.indent(textwrap.dedent(body).strip() + "\n", "    ")
+                    + "    return cube_waves.build(p, **options)\n")
     return str(path)
 
 
