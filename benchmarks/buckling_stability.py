@@ -41,7 +41,7 @@ def perfect_path(*, device, level: int, t_end: float, frames: int):
 
     module = load_scene("buckling")
     p = resolve(module.Parameters, None, [f"level={level}", "dtype=float64", "noise=0", "self_contact=false",
-                                          "relax_method=auto", "overdamped=false", f"t_end={t_end}",
+                                          "relax_method=auto", "accept_unconverged=false", f"t_end={t_end}",
                                           f"frames={frames}"])  # fmt: skip
     run = module.build(p, device=device, report=lambda message: None)
 

@@ -63,7 +63,7 @@ def crawler(scene: str, p, device, smoothing: float, tol: float):
     t_end = p.periods * fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
     dt = p.dt or min(AUTO_DT_SAFETY * model.wave(operator, c0=c0).stable_dt, t_end / p.frames)
     wave = model.wave(operator, c0=c0, dt=dt)
-    coupled = QuasiStatic(shell, wave, sensitive=p.sensitive, x0=x0, method="ncg", tol=tol, overdamped=True)
+    coupled = QuasiStatic(shell, wave, sensitive=p.sensitive, x0=x0, method="ncg", tol=tol, accept_unconverged=True)
     masses = p.density * LaplaceBeltrami(placed.mesh, rule=shell.rule, device="cpu", dtype="float64").mass()
     return coupled, placed, masses, options
 

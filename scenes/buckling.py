@@ -14,13 +14,13 @@ DESCRIPTION = "buckling sphere, R/h = 20, AI = 11, AC = 0: telegraph wave from t
 
 @dataclass(frozen=True)
 class BucklingParameters(SphereParameters):
-    """What the buckling scenes share: an overdamped shell that may lag its reference, self-contact, the
+    """What the buckling scenes share: a shell that may lag its reference, self-contact, the
     adaptive chemistry step and a seeded imperfection."""
 
     AI: float = param(11.0, "curvature coupling AI (the paper's)")
-    overdamped: bool = param(True, "accept a relaxation that spends its budget: the shell lags its reference near the "
+    accept_unconverged: bool = param(True, "accept a relaxation that spends its budget: the shell lags its reference near the "
                              "instability")  # fmt: skip
-    relax_iterations: int = param(2000, "CG iterations per relaxation (the overdamped shell's budget)", minimum=1)
+    relax_iterations: int = param(2000, "CG iterations per relaxation (the lagging shell's budget)", minimum=1)
     relax_method: str = param("ncg", "ncg: CG only (auto and newton need self_contact=false)",
                               choices=("auto", "ncg", "newton"))  # fmt: skip
     adaptive_dt: bool = param(True, "where a sharpening fold lowers the wave's stability bound below dt, step on at "

@@ -98,7 +98,7 @@ def poison_rate(batch, n):
 
 
 def spoil_worlds():
-    return worlds(overdamped=False, relax_iterations=SPOIL_BUDGET, dt=0.5, relax_every=2)
+    return worlds(accept_unconverged=False, relax_iterations=SPOIL_BUDGET, dt=0.5, relax_every=2)
 
 
 @functools.cache
@@ -147,12 +147,12 @@ def test_a_quasi_static_batch_refuses_the_adaptive_step_and_self_contact():
             scene.build_batch(ps, seeds=[0, 0], device="cpu", report=QUIET)
 
 
-def test_an_overdamped_shell_does_not_accept_positions_that_are_not_finite():
-    """The overdamped coupling accepts a relaxation that spent its budget, never one from NaN positions
+def test_accept_unconverged_does_not_take_positions_that_are_not_finite():
+    """accept_unconverged takes a relaxation that spent its budget, never one from NaN positions
     (max |F| skips NaN: without the energy's check it would read as converged)."""
     from wavewarp.relax import RelaxationError
 
-    run = scene.build(worlds(overdamped=True)[0], device="cpu", report=QUIET)
+    run = scene.build(worlds(accept_unconverged=True)[0], device="cpu", report=QUIET)
     x = run.coupled.positions()
     x[5] = np.nan
     run.coupled.state.set("x", x)

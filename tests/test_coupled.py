@@ -60,7 +60,7 @@ def test_mismatched_parts_are_refused():
         QuasiStatic(shell, "telegraph")
 
 
-def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
+def test_accept_unconverged_takes_a_spent_budget_and_the_default_refuses_it():
     mesh = icosphere(1.0, 2)
     c0 = np.full(mesh.n_vertices, 1.0)
     parts = dict(thickness=0.05, young=1.0, AC=0.3, AI=0.5, **F64)
@@ -68,7 +68,7 @@ def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
         QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3,
                     method="ncg")  # fmt: skip
     run = QuasiStatic(Shell(mesh, **parts), Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3,
-                      overdamped=True, method="ncg")  # fmt: skip
+                      accept_unconverged=True, method="ncg")  # fmt: skip
     assert run.unconverged == 1 and run.relax_iterations == [3]
     energy = run.shell.energy(run.positions(), c0)
     assert energy < run.shell.energy(mesh.vertices, c0)  # three iterations of progress, kept
@@ -77,9 +77,9 @@ def test_overdamped_accepts_a_spent_budget_and_quasi_static_refuses_it():
     assert run.shell.energy(run.positions(), c0) < energy
 
 
-def test_overdamped_accepts_a_round_off_stop_and_quasi_static_refuses_it(monkeypatch):
+def test_accept_unconverged_takes_a_round_off_stop_and_the_default_refuses_it(monkeypatch):
     """A relaxation whose line search finds no lower energy far above tol (as at the buckling's
-    sharpest fold, docs/theory/scenes.md): quasi-static runs stop, overdamped ones go on from where it
+    sharpest fold, docs/theory/scenes.md): the default stops, accept_unconverged goes on from where it
     stopped and count it."""
     import wavewarp.coupled
 
@@ -100,5 +100,5 @@ def test_overdamped_accepts_a_round_off_stop_and_quasi_static_refuses_it(monkeyp
 
     with pytest.raises(RelaxationError, match="no lower energy"):
         coupled()
-    run = coupled(overdamped=True)
+    run = coupled(accept_unconverged=True)
     assert run.unconverged == 1 and np.array_equal(run.positions(), stopped_at)

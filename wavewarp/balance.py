@@ -32,6 +32,7 @@ class ChemicalBalance:
         self.error = np.zeros(self.worlds)
         self.min_concentration, self.min_time = np.full(self.worlds, np.inf), [None] * self.worlds
         self.min_area_ratio = np.full(self.worlds, np.inf)
+        self.frame_minima = []  # per recorded frame: (time, each world's smallest field value)
 
     def record(self, time: float, positions, concentration, expected_total) -> None:
         c = np.asarray(concentration, dtype=np.float64)
@@ -41,6 +42,7 @@ class ChemicalBalance:
         field = self._meter.field_values(c)
         expected = np.broadcast_to(np.asarray(expected_total, dtype=np.float64), (self.worlds,))
         n = len(c) // self.worlds
+        self.frame_minima.append((float(time), field.reshape(self.worlds, n).min(axis=1)))
         for w in range(self.worlds):
             world = slice(w * n, (w + 1) * n)
             ratio = float(np.min(shell_mass[world] / self.rest_mass[world]))
@@ -59,6 +61,12 @@ class ChemicalBalance:
                 "min_concentration": float(self.min_concentration[world]) if recorded else None,
                 "min_concentration_time": self.min_time[world],
                 "min_area_ratio": float(self.min_area_ratio[world]) if recorded else None}  # fmt: skip
+
+
+    def min_concentration_between(self, start: float, end: float, world: int = 0) -> float | None:
+        """World `world`'s smallest field value over the recorded frames with start <= time <= end (None if none)."""
+        values = [minima[world] for time, minima in self.frame_minima if start <= time <= end]
+        return float(min(values)) if values else None
 
 
 class FirstArrival:

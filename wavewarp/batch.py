@@ -32,7 +32,7 @@ from .runs import WaveClock, imperfect, mean_edge
 from .walker import (AUTO_DT_SAFETY, TRACE_COLUMNS, check_walker_steps, place_walker, restore_walk,
                      settled_walker_dynamics, walker_model)
 
-PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "mirror", "noise", "elongation")  # and the seed: the rest is shared
+PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "tau_m", "mirror", "noise", "elongation")  # and the seed: the rest is shared
 
 
 def check_batch(ps: list) -> None:

@@ -25,6 +25,7 @@ import warp as wp
 
 from . import kernels
 from .checks import count
+from .drag import Drag
 from .dynamics import ShellDynamics
 from .kernels.dynamics import eval_reference_ramp
 from .relax import NEWTON_STEPS, ROUND_OFF_SLACK, RelaxationError, checked_method, relax
@@ -33,7 +34,15 @@ from .shell import Shell
 from .state import FIELDS, State
 from .waves import BlowUpError, TimeStepError, _Stepper
 
-GRAPH_SUBSTEPS = 256  # mechanics steps per captured graph of the walkers' coupled steps
+COUPLINGS = ("quasi-static", "overdamped")  # the quasi-static scenes' mechanical update (docs/theory/transport.md)
+GRAPH_SUBSTEPS = 256
+# conservative transport: past this area ratio no equilibrium holds the chemical a contraction concentrates
+FOLD_AREA_RATIO = math.exp(-1.0)
+
+
+class FoldError(BlowUpError):
+    """A conservative chemical contracted its shell past the fold (a vertex's area below 1/e of its rest value):
+    no equilibrium holds the chemical the contraction concentrates (docs/theory/transport.md)."""  # mechanics steps per captured graph of the walkers' coupled steps
 
 
 def _check_pair(shell: Shell, wave: _Stepper) -> None:
@@ -52,11 +61,15 @@ class QuasiStatic:
 
     `sensitive=True`: the wave runs on the current (deformed) surface; False: on the rest
     surface (the deformation-insensitive twin). `tol`: the relaxation tolerance (Shell.relax).
-    `overdamped=True` accepts a relaxation that spends its `max_iterations` or whose line search
-    finds no lower energy (the paper's overdamped update: near a buckling instability the shell
+    `accept_unconverged=True` accepts a relaxation that spends its `max_iterations` or whose line search
+    finds no lower energy (a lagging shell: near a buckling instability the shell
     lags its reference instead of stopping the run); such steps are counted in `unconverged`.
     `method` and `max_iterations`, `newton_steps`: Shell.relax's ("auto": CG, then a Newton finish
     where CG spends its budget; counted in `newton_finishes`). The positions join the wave's state.
+
+    `drag` ζ > 0 makes each step overdamped instead of quasi-static: the shell moves by a backward-Euler step
+    of ζ ṗ = f over the step's interval (a `Drag` term in its relaxation, wavewarp/drag.py), relaxing towards
+    equilibrium at a finite rate; ζ → 0 is the quasi-static coupling. The equilibrium at t = 0 has no drag.
 
     Batched worlds (`Mesh.union`): every world relaxes in the same launches (nonlinear CG, one line
     search and convergence test per world). A world whose wave blows up, whose surface lowers the
@@ -70,8 +83,8 @@ class QuasiStatic:
     TALLIES = ("relaxations", "relax_iterations", "unconverged_relaxations", "newton_finishes", "round_off_relaxations")
 
     def __init__(self, shell: Shell, wave: _Stepper, *, sensitive: bool = True, chemistry_steps: int = 1, tol=None,
-                 x0=None, max_iterations: int = 20000, overdamped: bool = False, method: str = "auto",
-                 newton_steps: int = NEWTON_STEPS):  # fmt: skip
+                 x0=None, max_iterations: int = 20000, accept_unconverged: bool = False, method: str = "auto",
+                 newton_steps: int = NEWTON_STEPS, drag: float = 0.0):  # fmt: skip
         if not isinstance(shell, Shell):
             raise ValueError(f"shell must be a wavewarp.Shell, got {type(shell).__name__}")
         _check_pair(shell, wave)
@@ -83,13 +96,18 @@ class QuasiStatic:
         self.tol = float(tol)
         self.max_iterations = count("max_iterations", max_iterations, 1)
         self.method, self.newton_steps = checked_method(method), count("newton_steps", newton_steps, 1)
-        self.overdamped = bool(overdamped)
+        self.accept_unconverged = bool(accept_unconverged)
         self.worlds = shell.worlds
         self.tallies = {name: np.zeros(self.worlds, dtype=np.int64) for name in self.TALLIES}
         self.relax_iterations = []  # CG iterations per relaxation (one world; a batch: an array per relaxation)
         self.stopped = {}  # batched worlds: world -> the error that stopped it
         self._frozen = {}  # world -> its state arrays' share at the start of the step it failed in
         self._step_start = None  # batched worlds: the state at the start of the current step
+        self.rest_mass = self.operator.mass()  # the fold's reference (the operator is on the rest surface here)
+        self.drag = None
+        if np.any(drag):  # one ζ, or one per batched world
+            self.drag = Drag(shell, drag=drag)
+            shell.terms = (*shell.terms, self.drag)
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
         wave.state.x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
         self._equilibrate(initial=True, start=self._start_of_step())
@@ -119,6 +137,8 @@ class QuasiStatic:
     def _equilibrate(self, initial: bool = False, start=None) -> None:
         x, shell = self.state.x, self.shell
         shell.update_reference(self.state.c)
+        if self.drag is not None and not initial:
+            self.drag.set_interval(self.chemistry_steps * self.wave.dt)
         for term in shell.terms:  # a load step starts where the last equilibrium left the shell (RestingGround)
             term.begin_step(x)
         running = np.array([w not in self.stopped for w in range(self.worlds)])
@@ -128,11 +148,11 @@ class QuasiStatic:
                   newton_steps=self.newton_steps)  # device to device
         except RelaxationError as error:
             for w, (residual, round_off) in error.failures.items():
-                finite = math.isfinite(residual)  # not finite positions: no overdamped lag accepts them
+                finite = math.isfinite(residual)  # not finite positions: no lag accepts them
                 if finite and round_off and residual <= ROUND_OFF_SLACK * self.tol:
                     self.tallies["round_off_relaxations"][w] += 1  # the dtype's floor just above tol (float32)
-                elif finite and self.overdamped:
-                    # overdamped: the shell lags its reference (budget spent, or no lower energy found at a
+                elif finite and self.accept_unconverged:
+                    # the shell lags its reference (budget spent, or no lower energy found at a
                     # sharp fold); the next step goes on from here
                     self.tallies["unconverged_relaxations"][w] += 1
                 elif self.worlds == 1:
@@ -153,6 +173,26 @@ class QuasiStatic:
             self.operator.update(x)
         elif self.sensitive:
             self.wave.move_surface(x)
+            if self.wave.transport == "conservative":
+                self._check_fold(start)
+
+    def _check_fold(self, start) -> None:
+        """Stop a conservative run (a batch: each world apart) whose shell contracted past the fold."""
+        ratio = (self.operator.mass() / self.rest_mass).reshape(self.worlds, -1)
+        past = [w for w in np.flatnonzero(ratio.min(axis=1) < FOLD_AREA_RATIO) if int(w) not in self.stopped]
+        if not past:
+            return
+        w = int(past[0])
+        vertex = int(np.argmin(ratio[w]))
+        where = "" if self.worlds == 1 else f"world {w}: "
+        error = FoldError(
+            f"{where}at t = {self.time:.4g} the shell contracted past the fold of conservative transport: vertex "
+            f"{vertex}'s area is {ratio[w, vertex]:.3f} of its rest value, below 1/e, where no equilibrium holds the "
+            "chemical a contraction concentrates (docs/theory/transport.md); end the run before (--set t_end) or "
+            "take --set transport=material", self.time, self.wave.steps)
+        if self.worlds == 1:
+            raise error
+        self._stop([int(w) for w in past], error, start)
 
     def _stop(self, worlds, error: Exception, start) -> None:
         """Stop `worlds` (batched): their state at the step's start is kept, their live share parked at

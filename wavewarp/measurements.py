@@ -129,13 +129,67 @@ def asymmetry_measurements(run) -> dict:
 
 
 def oocyte_profile(run, x) -> tuple:
-    """A frame's figures and checks: the meridian's curvature radius (the kymograph's row) and the
-    shell's shape asymmetry."""
-    return meridian_curvature_radius(run, x), shape_asymmetry(run, x)
+    """A frame's figures and checks: the meridian's curvature radius (the kymograph's row), the
+    shell's shape asymmetry and its contraction profile."""
+    return meridian_curvature_radius(run, x), shape_asymmetry(run, x), contraction_profile(run, x)
 
 
 def oocyte_measurements(run) -> dict:
-    return {**sphere_wave_measurements(run), **asymmetry_measurements(run)}
+    return {**sphere_wave_measurements(run), **asymmetry_measurements(run), **contraction_measurements(run),
+            **phase_minima(run)}
+
+
+def phase_minima(run) -> dict:
+    """The smallest concentration (the field at the limit points) while the front expands, up to its arrival at
+    the equator (rest arc length πR/2 from the origin), and after it, while it converges on the antipode."""
+    equator = (0.5 * math.pi * run.size - run.front_start) / run.p.gamma
+    balance = getattr(run, "balance", None)  # (a batch's world view has none)
+    if balance is None:
+        return dict.fromkeys(("min_concentration_expanding", "min_concentration_converging"))
+    return {"min_concentration_expanding": balance.min_concentration_between(0.0, equator),
+            "min_concentration_converging": balance.min_concentration_between(equator + 1e-12, math.inf)}
+
+
+PROFILE_BINS = 36  # rest polar-angle bins of the contraction profile (5° each)
+PROFILE_FRACTIONS = (0.25, 0.5, 0.75)  # the frames whose profiles a run reports, as fractions of its end time
+
+
+def contraction_profile(run, x, bins=PROFILE_BINS) -> np.ndarray:
+    """The shell's cross-section as paper Fig. 1a/b overlays it: the mean distance from the centroid, in R, of the
+    control vertices in each of `bins` bins of their rest polar angle from the wave's origin (the ring average:
+    an axisymmetric shell's meridian)."""
+    theta, _ = polar_coordinates(run)
+    x = np.asarray(x, dtype=np.float64)
+    radius = np.linalg.norm(x - x.mean(axis=0), axis=1)
+    index = np.minimum((theta / math.pi * bins).astype(int), bins - 1)
+    counts = np.bincount(index, minlength=bins)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, np.bincount(index, radius, bins) / counts, np.nan) / run.size  # NaN: no vertex
+
+
+def _listed(profile: np.ndarray) -> list:
+    return [None if np.isnan(v) else float(v) for v in profile]  # JSON has no NaN
+
+
+def contraction_measurements(run) -> dict:
+    """`contraction_depth`: the deepest contraction over the frames, 1 − r/R of the contraction profile's lowest
+    bin, with its time and rest polar angle (degrees); `contraction_profiles`: the profiles of the frames nearest
+    PROFILE_FRACTIONS of the last frame's time ({time: profile})."""
+    frames = [(t, value[2]) for t, value in run.profiles if len(value) > 2]
+    if not frames:
+        return dict.fromkeys(("contraction_depth", "contraction_depth_time", "contraction_depth_angle",
+                              "contraction_profiles"))
+    depths = [1.0 - float(np.nanmin(profile)) for _, profile in frames]
+    k = int(np.argmax(depths))
+    angle = (int(np.nanargmin(frames[k][1])) + 0.5) * 180.0 / len(frames[k][1])
+    times = np.array([t for t, _ in frames])
+    chosen = sorted({int(np.argmin(np.abs(times - f * times[-1]))) for f in PROFILE_FRACTIONS})
+    return {
+        "contraction_depth": depths[k],
+        "contraction_depth_time": float(times[k]),
+        "contraction_depth_angle": angle,
+        "contraction_profiles": {f"{times[j]:.6g}": _listed(frames[j][1]) for j in chosen},
+    }
 
 
 def meridian_curvature_radius(run, x, bins=90) -> np.ndarray:

@@ -108,14 +108,22 @@ class NewtonFinish:
             self.energy = wp.zeros(1, dtype=wp.float64)
         # the last factorization and LM shift, kept across steps and relaxations (a preconditioner)
         self.inverse, self.shift = None, None
+        self._twinned = ()  # the shell's terms the twin's were made from
         self.factorizations = self.krylov_steps = 0
 
     def share_reference(self) -> None:
-        """Give the float64 twin (if any) the shell's active reference concentrations and V̄."""
+        """Give the float64 twin (if any) the shell's active reference concentrations, V̄ and terms (each term's
+        own `twin`, given the step's state by its `share`)."""
         if self.work is not self.shell:
             c = self.shell.reference_c.numpy().astype(np.float64)
             self.work.update_reference(wp.array(c, dtype=wp.float64, device=self.work.device))
             self.work.rest_volume = self.shell.rest_volume
+            terms = self.shell.terms
+            if self._twinned != terms:
+                self.work.terms = tuple(term.twin(self.work) for term in terms)
+                self._twinned = terms
+            for term, twin in zip(terms, self.work.terms):
+                term.share(twin)
 
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(E, F) at positions x (float64 NumPy)."""

@@ -18,7 +18,7 @@ import numpy as np
 from .boxes import box_wave_measurements, face_heights, imprint_measurements
 from .balance import ChemicalBalance
 from .chemistry import telegraph_total
-from .coupled import QuasiStatic
+from .coupled import COUPLINGS, FoldError, QuasiStatic
 from .figures import arrival_map_png, frame_png, imprint_png, kymograph_png
 from .initial import gaussian_pulse, steady_front
 from .laplace import J_FLOOR
@@ -46,6 +46,11 @@ class TelegraphParameters:
     frames: int = param(48, "frames written between t = 0 and t_end", minimum=1)
     sensitive: bool = param(True, "true: the wave runs on the deformed shell; false: on the rest shell (the twin)")
     transport: str = transport_parameter()
+    coupling: str = param("quasi-static", "quasi-static: the shell relaxes to equilibrium after every relaxation "
+                          "interval; overdamped: it moves by a backward-Euler step of ζ ṗ = f over it (tau_m)",
+                          choices=COUPLINGS, legacy="quasi-static")
+    tau_m: float = param(1.0, "overdamped coupling: the mechanical relaxation time τ_m = ζ S²/(Y h), S the scene's "
+                         "size (R, L)", positive=True)
     mass_corrections: int = param(0, "Richardson steps from the lumped towards the consistent mass (0: lumped)",
                                   minimum=0)  # fmt: skip
     relax_every: int = param(0, "chemistry steps per relaxation; auto (0) = as many as keep the wave within half a control "
@@ -56,7 +61,7 @@ class TelegraphParameters:
     newton_steps: int = param(NEWTON_STEPS, "Newton steps a relaxation's finish may take", minimum=1)
     relax_method: str = param("auto", "auto: CG, then Newton where CG spends its budget; ncg: CG only; newton: "
                               "Newton only", choices=("auto", "ncg", "newton"))  # fmt: skip
-    overdamped: bool = param(False, "true: a relaxation that spends its budget is accepted (the shell lags its "
+    accept_unconverged: bool = param(False, "true: a relaxation that spends its budget is accepted (the shell lags its "
                              "reference) instead of stopping the run")  # fmt: skip
     dtype: str = param("float32", "float32 or float64", choices=("float32", "float64"))
 
@@ -150,12 +155,20 @@ def frame_clock(p, t_end: float, edge: float, bound: float, report=print) -> tup
     return dt, relax_every, steps_per_frame, frames
 
 
-def quasi_static_coupling(shell, wave, p, relax_every: int) -> QuasiStatic:
-    """The scenes' QuasiStatic coupling from the parameters (relax_iterations auto: CG_BUDGET)."""
+def drag_coefficient(p, size: float) -> float:
+    """ζ of the overdamped coupling: τ_m = ζ S² / (Y h), S the scene's size."""
+    return p.tau_m * p.young * p.thickness / size**2
+
+
+def quasi_static_coupling(shell, wave, ps: list, relax_every: int, size: float) -> QuasiStatic:
+    """The scenes' QuasiStatic coupling from the parameters `ps` (one set, or one per batched world; relax_iterations
+    auto: CG_BUDGET); overdamped: each world's ζ."""
+    p = ps[0]
     budget = p.relax_iterations or CG_BUDGET[shell.device.is_cuda]
+    drag = [drag_coefficient(q, size) for q in ps] if p.coupling == "overdamped" else 0.0
     return QuasiStatic(shell, wave, sensitive=p.sensitive, chemistry_steps=relax_every, tol=p.relax_tol or None,
-                       max_iterations=budget, overdamped=p.overdamped, method=p.relax_method,
-                       newton_steps=p.newton_steps)  # fmt: skip
+                       max_iterations=budget, accept_unconverged=p.accept_unconverged, method=p.relax_method,
+                       newton_steps=p.newton_steps, drag=drag)  # fmt: skip
 
 
 class QuasiStaticWaveRun(WaveClock):
@@ -178,7 +191,7 @@ class QuasiStaticWaveRun(WaveClock):
         dt, relax_every, self.steps_per_frame, self.frames = frame_clock(
             p, t_end, mean_edge(mesh), self.model.wave(self.operator, c0=c0).stable_dt, report)  # fmt: skip
         self.wave = self.model.wave(self.operator, c0=c0, v0=v0, dt=dt)
-        self.coupled = quasi_static_coupling(self.shell, self.wave, p, relax_every)
+        self.coupled = quasi_static_coupling(self.shell, self.wave, [p], relax_every, size)
         self.resolved = as_dict(replace(p, dt=dt, relax_every=relax_every, frames=self.frames,
                                         relax_iterations=self.coupled.max_iterations))  # fmt: skip
         # the telegraph invariant from the state at t = 0 (on the equilibrium surface)
@@ -245,7 +258,7 @@ class QuasiStaticWaveRun(WaveClock):
         grown far past its rest value, or a point where the limit surface is singular (its area
         element below J_FLOOR of the rest one). Both are folds sharper than the mesh, where each
         relaxation pumps energy into the wave."""
-        if not self.p.sensitive:
+        if not self.p.sensitive or isinstance(error, FoldError):
             return error
         growth = self.operator.mass() / self.rest_mass
         vertex = int(np.argmax(growth))

@@ -6,7 +6,7 @@ per-world couplings and moduli (AC, AI, h, Y, μV); the telegraph wave steps eve
 launches, and every relaxation is one nonlinear-CG loop with a line search and a convergence test per
 world. Worlds never interact, so in deterministic float64 each world equals its own single run bit for
 bit (tests/test_batch_quasistatic.py). A world whose wave blows up, whose surface lowers the stability
-bound below the shared dt, or whose relaxation fails (not overdamped) is stopped alone
+bound below the shared dt, or whose relaxation fails (unless accept_unconverged) is stopped alone
 (`QuasiStatic.stopped`); the others go on.
 
     batch = buckling_modes.build_batch([p0, p1, p2], seeds=[0, 0, 0])
@@ -70,7 +70,7 @@ class QuasiStaticBatch(WorldsRun):
         dt, relax_every, self.steps_per_frame, self.frames = frame_clock(
             p, t_end, edge, self.model.wave(self.operator, c0=c0).stable_dt, report)  # fmt: skip
         self.wave = self.model.wave(self.operator, c0=c0, v0=v0, dt=dt)
-        self.coupled = quasi_static_coupling(self.shell, self.wave, p, relax_every)
+        self.coupled = quasi_static_coupling(self.shell, self.wave, ps, relax_every, size)
         self.resolved = [as_dict(replace(q, dt=dt, relax_every=relax_every, frames=self.frames,
                                          relax_iterations=self.coupled.max_iterations)) for q in ps]  # fmt: skip
         mass, c, rate = self.operator.mass(), self.wave.concentration(), self.wave.velocity()
