@@ -17,6 +17,8 @@ import numpy as np
 
 from .version import __version__
 
+SCENE_MESH = "the scene's own mesh"  # the mesh_source of a run without --mesh
+
 
 def digest(array, dtype) -> str:
     """SHA-256 (hex) of `array` as little-endian `dtype`, prefixed by its shape: equal arrays, equal digests."""
@@ -35,7 +37,7 @@ def command_line(arguments) -> str:
 
 def resume_mismatch(stored: dict, run: dict) -> str | None:
     """What differs between a trajectory's root attributes `stored` and the run `run` that would continue it
-    (the same keys: scene, wavewarp_version, seed, mesh_sha256, rest_positions_sha256, mesh_source), as
+    (the same keys: scene, wavewarp_version, seed, mesh_sha256, rest_positions_sha256), as
     "what differs: how to fix it"; None when they agree. Attributes a file from before them lacks are not
     compared (its stored mesh and rest shape still are, by their digests)."""
     source = stored.get("mesh_source", "")
@@ -55,9 +57,6 @@ def resume_mismatch(stored: dict, run: dict) -> str | None:
         if key in stored and key in run and str(stored[key]) != str(run[key]):
             return message(stored[key], run[key])
     return None
-
-
-SCENE_MESH = "the scene's own mesh"
 
 
 def run_provenance(*, seed: int, mesh_path: str | None, frames: int, arguments) -> dict:
