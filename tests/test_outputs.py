@@ -27,6 +27,12 @@ CUBE = ["cube-waves", *QUICK, "--set", "t_end=auto", "--set", "frames=6"]
 HANG_GUARD_S = 600  # a test that waits on another process fails after this (a guard against hanging, no limit)
 
 
+def interruptible() -> None:
+    """In the child before it starts: SIGINT back to its default, as at a terminal (a process started with
+    SIGINT ignored, as a pytest worker that ran a Dask cluster may pass on, keeps ignoring it)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.fixture
 def waiting_runs(tmp_path):
     """start(name): `start_waiting_run` in tmp_path; any still running at the end is killed."""
@@ -48,7 +54,8 @@ def start_waiting_run(folder, name: str) -> subprocess.Popen:
     once its first frame is in the HDF5 file (the file takes its name with that frame)."""
     out, h5 = folder / f"{name}.usda", folder / f"{name}.h5"
     process = subprocess.Popen([sys.executable, "-m", "wavewarp.cli", "run", waiting_scene(folder), *QUICK, "--out",
-                                str(out), "--h5", str(h5)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                                str(out), "--h5", str(h5)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=interruptible)
     start = time.monotonic()
     while not h5.exists():
         assert process.poll() is None, process.communicate()
