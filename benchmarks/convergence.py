@@ -255,7 +255,8 @@ def markdown(table: dict, header: str) -> str:
                 for key, conv in seq.get("contraction_profiles", {}).items():
                     diffs = " → ".join(f"{d:.3g}" for d in conv["differences"])
                     order = "—" if conv["order"] is None else f"{conv['order']:.2f}"
-                    lines.append(f"| profile at t = {key} (max diff) | {diffs} | {order} | ± {conv['error']:.2g} |")
+                    error = "—" if conv["error"] is None else f"{conv['error']:.2g}"
+                    lines.append(f"| profile at t = {key} (max diff) | {diffs} | {order} | ± {error} |")
                 lines.append("")
         for name, why in entry["stopped"].items():
             lines.append(f"- {name} stopped: {why}")
@@ -316,6 +317,11 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default="convergence", help="folder of points/ and the tables")
     parser.add_argument("--tables", action="store_true", help="only rebuild the tables from DIR/points")
     parser.add_argument(
+        "--longest-first",
+        action="store_true",
+        help="start the finest points first (default: the shortest, so that a bench cut short keeps most)",
+    )
+    parser.add_argument(
         "--max-seconds",
         type=float,
         default=math.inf,
@@ -335,7 +341,7 @@ def main(argv=None) -> int:
             )
             if not os.path.exists(os.path.join(folder, point_name(p) + ".json"))
         ]
-        todo.sort(key=lambda p: 4 ** p["level"] * 2 ** p["k"])  # the shortest first: an interrupted bench keeps most
+        todo.sort(key=lambda p: 4 ** p["level"] * 2 ** p["k"], reverse=args.longest_first)
         print(f"{len(todo)} points to run on {device} with {args.workers} workers", flush=True)
         context = multiprocessing.get_context("spawn")
         with concurrent.futures.ProcessPoolExecutor(args.workers, mp_context=context) as pool:

@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass
 
+from wavewarp.coupled import COUPLINGS
 from wavewarp.parameters import param
 from wavewarp.quasistatic import SphereParameters, sphere_wave_run
 
@@ -17,8 +18,12 @@ class Parameters(SphereParameters):
     AC: float = param(0.5, "metric coupling AC (the paper's)")
     AI: float = param(0.5, "curvature coupling AI (the paper's)")
     mu_v: float = param(24.0, "volume penalty μV in units of Y h / R⁴ (the paper's)", minimum=0.0)
-    t_end: float = param(0.0, "end time; auto (0) = 0.8 π R / γ, before the wave focuses on the antipode", minimum=0.0,
-                         auto=True)
+    t_end: float = param(
+        0.0, "end time; auto (0) = 0.8 π R / γ, before the wave focuses on the antipode", minimum=0.0, auto=True
+    )
+    coupling: str = param("overdamped", "overdamped or quasi-static (docs/studies/2026-12-02-readings-of-the-model.md)",
+                          choices=COUPLINGS, legacy="quasi-static")
+    tau_m: float = param(0.3, "the overdamped shell's relaxation time τ_m = ζ R²/(Y h)", positive=True)
 
 
 QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3

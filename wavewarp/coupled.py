@@ -35,14 +35,14 @@ from .state import FIELDS, State
 from .waves import BlowUpError, TimeStepError, _Stepper
 
 COUPLINGS = ("quasi-static", "overdamped")  # the quasi-static scenes' mechanical update (docs/theory/transport.md)
-GRAPH_SUBSTEPS = 256
+GRAPH_SUBSTEPS = 256  # mechanics steps per captured graph of the walkers' coupled steps
 # conservative transport: past this area ratio no equilibrium holds the chemical a contraction concentrates
 FOLD_AREA_RATIO = math.exp(-1.0)
 
 
 class FoldError(BlowUpError):
     """A conservative chemical contracted its shell past the fold (a vertex's area below 1/e of its rest value):
-    no equilibrium holds the chemical the contraction concentrates (docs/theory/transport.md)."""  # mechanics steps per captured graph of the walkers' coupled steps
+    no equilibrium holds the chemical the contraction concentrates (docs/theory/transport.md)."""
 
 
 def _check_pair(shell: Shell, wave: _Stepper) -> None:

@@ -134,9 +134,11 @@ def oocyte_profile(run, x) -> tuple:
     return meridian_curvature_radius(run, x), shape_asymmetry(run, x), contraction_profile(run, x)
 
 
-def oocyte_measurements(run) -> dict:
-    return {**sphere_wave_measurements(run), **asymmetry_measurements(run), **contraction_measurements(run),
-            **phase_minima(run)}
+def oocyte_measurements(run, theta_range=(math.pi / 4, 3 * math.pi / 4)) -> dict:
+    """An oocyte's measurements; `theta_range`: where the front speed is fitted (a run that ends early, a window
+    its front crosses)."""
+    return {**sphere_wave_measurements(run, theta_range), **asymmetry_measurements(run),
+            **contraction_measurements(run), **phase_minima(run)}
 
 
 def phase_minima(run) -> dict:
