@@ -28,8 +28,8 @@ HANG_GUARD_S = 600  # a test that waits on another process fails after this (a g
 
 
 def interruptible() -> None:
-    """In the child before it starts: SIGINT back to its default, as at a terminal (a process started with
-    SIGINT ignored, as a pytest worker that ran a Dask cluster may pass on, keeps ignoring it)."""
+    """In the child before it starts: SIGINT back to its default, as at a terminal (a suite started in the background
+    of a non-interactive shell ignores SIGINT, and its children inherit that)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
