@@ -26,7 +26,8 @@ def run_scene(scene: str, path: str) -> float:
 
     start = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):
-        code = cli(["run", scene, "--quick", "--device", "cpu", "--h5", path, "--out", os.path.splitext(path)[0] + ".usda"])
+        code = cli(["run", scene, "--quick", "--device", "cpu", "--overwrite", "--h5", path, "--out",
+                    os.path.splitext(path)[0] + ".usda"])
     if code != 0:
         raise RuntimeError(f"wavewarp run {scene} --quick exited {code}")
     return time.perf_counter() - start

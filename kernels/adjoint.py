@@ -6,7 +6,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .limit_surface import basis_row, patch_jet, patch_scalar
 from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
 from .shell import (
@@ -331,23 +331,27 @@ declare_overloads(shell_rates_kernel, x="vec3[]", direction="vec3[]", c="scalar[
 # ---------------------------------------------------------------- launchers
 
 
+@one_device
 def eval_push(source: wp.array, counter: wp.array, store: wp.array) -> None:
     """store[counter] = source (the row the device's counter names)."""
     kernel = push_scalars_kernel if source.dtype == wp.float64 else push_vectors_kernel
     wp.launch(kernel, dim=len(source), inputs=[source, counter], outputs=[store], device=source.device)
 
 
+@one_device
 def eval_pull(store: wp.array, counter: wp.array, offset: int, out: wp.array) -> None:
     """out = store[counter + offset]."""
     kernel = pull_scalars_kernel if out.dtype == wp.float64 else pull_vectors_kernel
     wp.launch(kernel, dim=len(out), inputs=[store, counter, int(offset)], outputs=[out], device=out.device)
 
 
+@one_device
 def eval_count(counter: wp.array, by: int) -> None:
     """counter += by, on the device."""
     wp.launch(count_kernel, dim=1, inputs=[counter, int(by)], device=counter.device)
 
 
+@one_device
 def eval_directional_derivative(x: wp.array, d: wp.array, step: float, evaluate, largest: wp.array, probe: wp.array,
                                 plus: wp.array, minus: wp.array, out: wp.array) -> None:  # fmt: skip
     """out += D_d F(x) = the central difference of `evaluate(probe, forces)` at x ± step d/max|d| (step a length)."""
@@ -361,12 +365,14 @@ def eval_directional_derivative(x: wp.array, d: wp.array, step: float, evaluate,
               device=device)  # fmt: skip
 
 
+@one_device
 def eval_weighted_dot(a: wp.array, b: wp.array, weight: float, slot: int, total: wp.array) -> None:
     """total[slot] += weight a · b."""
     wp.launch(weighted_dot_kernel, dim=len(a), inputs=[a, b, wp.float64(weight), int(slot)], outputs=[total],
               device=a.device)  # fmt: skip
 
 
+@one_device
 def eval_damping_adjoint(w_hat, x, v, mass, rigid, total_mass: float, rate: float, sums, second_moment, x_hat,
                          v_hat) -> None:  # fmt: skip
     """v̂ and x̂ of the damping toward the rigid-body motion (`damping_adjoint_kernel`); `rigid` the rows of x, v
@@ -381,34 +387,40 @@ def eval_damping_adjoint(w_hat, x, v, mass, rigid, total_mass: float, rate: floa
                                                           wp.float64(rate)], outputs=[x_hat, v_hat], device=device)
 
 
+@one_device
 def eval_step_adjoint(x_hat, v_hat, dt: float, w_hat) -> None:
     """ŵ = v̂ + dt x̂, v̂ = 0."""
     wp.launch(step_adjoint_kernel, dim=len(x_hat), inputs=[x_hat, scalar_of(x_hat)(dt)], outputs=[v_hat, w_hat],
               device=x_hat.device)  # fmt: skip
 
 
+@one_device
 def eval_coupling_transpose(gathered, area, response, scale: float, o_hat, out) -> None:
     """out = a ∘ gathered - scale r ô (`coupling_transpose_kernel`)."""
     wp.launch(coupling_transpose_kernel, dim=len(out), inputs=[gathered, area, response, scalar_of(area)(scale), o_hat],
               outputs=[out], device=out.device)  # fmt: skip
 
 
+@one_device
 def eval_area_scale(values, area, out) -> None:
     """out = a ∘ values."""
     wp.launch(area_scale_kernel, dim=len(out), inputs=[values, area], outputs=[out], device=out.device)
 
 
+@one_device
 def eval_add(total, part) -> None:
     """total += part."""
     wp.launch(add_vectors_kernel, dim=len(total), inputs=[part], outputs=[total], device=total.device)
 
 
+@one_device
 def eval_scaled_inverse_mass(w, inverse_mass, scale: float, out) -> None:
     """out = scale w / M."""
     wp.launch(scaled_inverse_mass_kernel, dim=len(w), inputs=[w, inverse_mass, scalar_of(inverse_mass)(scale)],
               outputs=[out], device=w.device)  # fmt: skip
 
 
+@one_device
 def eval_shell_rates(x, direction, c, patch: list, reference: list, rest: list, moduli: list, nu, AC, AI,
                      bilayer_radius, volume: list, rates, by_concentration: tuple, ramp: float) -> None:  # fmt: skip
     """rates[0] = `shell_rates_kernel`'s sums (zeroed here): `patch` the weighted patch tables, `reference` ā, ā⁻¹, b̄,
@@ -423,6 +435,7 @@ def eval_shell_rates(x, direction, c, patch: list, reference: list, rest: list, 
               outputs=[rates, *by_concentration], block_dim=REDUCTION_BLOCK, device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_shell_parameter_gradient(rates, factors, gradient) -> None:
     """gradient[i] -= factors[i] · rates[0] (`shell_parameter_gradient_kernel`; one row per slot)."""
     wp.launch(shell_parameter_gradient_kernel, dim=factors.shape[0], inputs=[rates, factors], outputs=[gradient],

@@ -6,7 +6,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .implicit_contact import friction_magnitude, friction_slope_at_rest, implicit_normal_force
 from .implicit_contact import slip_speed as slip_root
 from .reduce import REDUCTION_BLOCK, block_add, whole_blocks
@@ -226,6 +226,7 @@ def implicit_laws(ground, scale: float, dt: float) -> list:
                                             ground.sharpness)]  # fmt: skip
 
 
+@one_device
 def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, force_hat, u_hat, p_hat,
                               gradient, response_hat) -> None:  # fmt: skip
     """û (overwritten) and p̂ += ẑ of the implicit ground law at every point given f̂; gradient[0..4] += ∂/∂(k, β, μ,
@@ -235,12 +236,14 @@ def eval_implicit_law_adjoint(ground, p, u, response, scale: float, dt: float, f
               outputs=[u_hat, p_hat, gradient, response_hat], device=p.device)  # fmt: skip
 
 
+@one_device
 def eval_horizontal_sum(values, total) -> None:
     """total[0] += Σ values' horizontal parts."""
     wp.launch(horizontal_sum_kernel, dim=whole_blocks(len(values)), inputs=[values], outputs=[total],
               block_dim=REDUCTION_BLOCK, device=values.device)  # fmt: skip
 
 
+@one_device
 def eval_body_step_adjoint(ground, p, u, body, response, weight, scale: float, dt: float, sums: list, external,
                            seeds: list, u_hat, p_hat, gradient, body_hat, response_hat, weight_hat) -> None:  # fmt: skip
     """A Weiszfeld step of the body velocity backwards (`body_step_seeds_kernel`, `body_step_adjoint_kernel`): `sums`
@@ -253,6 +256,7 @@ def eval_body_step_adjoint(ground, p, u, body, response, weight, scale: float, d
               device=device)  # fmt: skip
 
 
+@one_device
 def eval_ground_adjoint(ground, p, u, force_hat, p_hat, u_hat, gradient) -> None:
     """p̂, û of the explicit ground law at the limit points, and its parameters' gradient[0..3] (k, β, μ, k_f)."""
     s = scalar_of(p_hat)

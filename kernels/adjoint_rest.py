@@ -16,7 +16,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .adjoint import ShellRates, point_rates
 from .limit_surface import basis_row, patch_jet, patch_scalar
 from .shell import material_stress
@@ -144,6 +144,7 @@ declare_overloads(rest_forms_adjoint_kernel, x="vec3[]", metric_hat="mat22[]", c
 # ---------------------------------------------------------------- launchers
 
 
+@one_device
 def eval_rest_forms_rate(x, direction, c, patch: list, reference: list, moduli: list, nu: float,
                          AC: float, AI: float, bilayer_A, metric_hat, curvature_hat) -> None:  # fmt: skip
     """Â⁰ −= ∂Ė/∂ā⁰, B̂⁰ −= ∂Ė/∂b̄⁰ at every point (`rest_forms_rate_kernel`); `patch` the patch tables, `reference`
@@ -155,12 +156,14 @@ def eval_rest_forms_rate(x, direction, c, patch: list, reference: list, moduli: 
               outputs=[metric_hat, curvature_hat], device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_rest_forms_adjoint(x, metric_hat, curvature_hat, tables, x_hat) -> None:
     """x̂ += the rest forms' adjoints Â⁰, B̂⁰ taken to the control points at x (`rest_forms_adjoint_kernel`)."""
     wp.launch(rest_forms_adjoint_kernel, dim=len(metric_hat), inputs=[x, metric_hat, curvature_hat, *tables.patch()],
               outputs=[x_hat], device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_volume_target_rate(rates, out) -> None:
     """out[0] −= ∂Ė/∂V̄ from `shell_rates_kernel`'s sums."""
     wp.launch(volume_target_rate_kernel, dim=1, inputs=[rates], outputs=[out], device=out.device)

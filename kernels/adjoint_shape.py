@@ -6,6 +6,7 @@ responses); the area contact's weights a_q = dω̄⁰_q through the spread of it
 
 import warp as wp
 
+from . import one_device
 
 @wp.kernel
 def inverse_mass_share_kernel(a: wp.array(dtype=wp.vec3d), b: wp.array(dtype=wp.vec3d),
@@ -61,12 +62,14 @@ def first_component_kernel(values: wp.array(dtype=wp.float64), out: wp.array(dty
     out[i] = wp.vec3d(values[i], wp.float64(0.0), wp.float64(0.0))
 
 
+@one_device
 def eval_inverse_mass_share(a, b, inverse_mass, scale: float, mass_hat) -> None:
     """M̂_J -= scale a_J·b_J / M_J² (`inverse_mass_share_kernel`)."""
     wp.launch(inverse_mass_share_kernel, dim=len(a), inputs=[a, b, inverse_mass, wp.float64(scale)],
               outputs=[mass_hat], device=a.device)  # fmt: skip
 
 
+@one_device
 def eval_rigid_motion_mass_share(x, v, rigid, sums, total_mass: float, rate: float, mass_hat) -> None:
     """M̂ += the damping's rigid-body motion's share (`rigid_motion_mass_share_kernel`), `sums` as the damping's
     adjoint left them."""
@@ -75,17 +78,20 @@ def eval_rigid_motion_mass_share(x, v, rigid, sums, total_mass: float, rate: flo
               device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_response_share(o_hat, forces, scale: float, response_hat) -> None:
     """r̂ -= scale ô·f (`response_share_kernel`)."""
     wp.launch(response_share_kernel, dim=len(o_hat), inputs=[o_hat, forces, wp.float64(scale)],
               outputs=[response_hat], device=o_hat.device)  # fmt: skip
 
 
+@one_device
 def eval_point_weight_share(a, b, divisor, weight_hat) -> None:
     """â_q += a_q·b_q / divisor_q (`point_weight_share_kernel`)."""
     wp.launch(point_weight_share_kernel, dim=len(a), inputs=[a, b, divisor], outputs=[weight_hat], device=a.device)
 
 
+@one_device
 def eval_first_component(values, out) -> None:
     """out = (values, 0, 0) per point."""
     wp.launch(first_component_kernel, dim=len(values), inputs=[values], outputs=[out], device=values.device)

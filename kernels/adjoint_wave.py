@@ -14,7 +14,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .laplace import gather_point_factors_kernel
 from .limit_surface import basis_row, first_form, patch_jet
 
@@ -152,6 +152,7 @@ declare_overloads(operator_position_adjoint_kernel, x="vec3[]", u="scalar[]", v=
 # ---------------------------------------------------------------- launchers
 
 
+@one_device
 def eval_fhn_explicit_adjoint(c, c_next_hat, w_next_hat, nu: float, kappa: float, epsilon: float, gamma: float,
                               dt: float, c_hat, w_hat, acceleration_hat) -> None:  # fmt: skip
     """ĉ, ŵ (the reaction's and the inhibitor's shares) and ẑ of an explicit FHN step
@@ -162,29 +163,34 @@ def eval_fhn_explicit_adjoint(c, c_next_hat, w_next_hat, nu: float, kappa: float
               outputs=[c_hat, w_hat, acceleration_hat], device=c.device)  # fmt: skip
 
 
+@one_device
 def eval_transport_adjoint(value, value_next_hat, old_mass, mass, value_hat, old_mass_hat, mass_hat) -> None:
     """v̂ of the values before a conservative transport, and the masses' adjoints (accumulated)."""
     wp.launch(transport_adjoint_kernel, dim=len(value), inputs=[value, value_next_hat, old_mass, mass],
               outputs=[value_hat, old_mass_hat, mass_hat], device=value.device)  # fmt: skip
 
 
+@one_device
 def eval_divide_adjoint(r_hat, f, mass, f_hat, mass_hat) -> None:
     """r = f / M backwards (`divide_adjoint_kernel`)."""
     wp.launch(divide_adjoint_kernel, dim=len(f), inputs=[r_hat, f, mass], outputs=[f_hat, mass_hat], device=f.device)
 
 
+@one_device
 def eval_richardson_adjoint(r_hat, f, mass_product, mass, f_hat, mass_hat, q) -> None:
     """One Richardson step backwards but for M_c (`richardson_adjoint_kernel`)."""
     wp.launch(richardson_adjoint_kernel, dim=len(f), inputs=[r_hat, f, mass_product, mass],
               outputs=[f_hat, mass_hat, q], device=f.device)  # fmt: skip
 
 
+@one_device
 def eval_add_scaled(total, part, scale: float) -> None:
     """total += scale part."""
     wp.launch(add_scaled_kernel, dim=len(total), inputs=[part, scalar_of(total)(scale)], outputs=[total],
               device=total.device)  # fmt: skip
 
 
+@one_device
 def eval_operator_position_adjoint(x, u, v, m, stiffness_weight: float, mass_weight: float, tables, j_floor,
                                    x_hat) -> None:  # fmt: skip
     """x̂ += ∂/∂x (κ_K u K v + κ_M u M_c v + m·M_L) on the surface of `tables` (a SurfaceTables) at x."""
@@ -194,6 +200,7 @@ def eval_operator_position_adjoint(x, u, v, m, stiffness_weight: float, mass_wei
               outputs=[x_hat], device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_gather_point_factors(factors, tables, scratch, out) -> None:
     """out += Nᵀ s₀ (kernels/laplace.py's gather of the point factors (s₀, 0, 0); `scratch` a vertex array): per-point
     values of a field's adjoint to its control values."""

@@ -14,7 +14,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .limit_surface import basis_row, limit_motion_kernel, patch_scalar
 
 
@@ -141,6 +141,7 @@ def spread_to_control_points(ground, point_forces: wp.array, mask, patch: list, 
                   device=forces.device)  # fmt: skip
 
 
+@one_device
 def eval_ground(ground, x: wp.array, v: wp.array, mask, patch: list, rest_area, points: wp.array, velocities: wp.array,
                 normal_force: wp.array, point_forces: wp.array, forces: wp.array) -> None:  # fmt: skip
     """Contact and friction of `ground` (a wavewarp.Ground) on the shell at x, v, added to the control points'

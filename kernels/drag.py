@@ -10,7 +10,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads
+from . import declare_overloads, one_device
 
 
 @wp.kernel
@@ -40,6 +40,7 @@ declare_overloads(
 )
 
 
+@one_device
 def eval_drag(points, anchors, area, coefficient, with_energy: bool, pressures, energy_density) -> None:
     """Launch `drag_kernel` over the quadrature points (one coefficient per world, read on the device: capturable)."""
     wp.launch(

@@ -8,7 +8,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .reduce import REDUCTION_BLOCK, block_add
 
 
@@ -200,6 +200,7 @@ declare_overloads(speed_runaway_kernel, v="vec3[]", limit="scalar")
 # ---------------------------------------------------------------- launchers
 
 
+@one_device
 def eval_rigid_correction(forces: wp.array, mass: wp.array, x: wp.array, v: wp.array, with_momentum: bool, worlds: int,
                           threads: int, inverse_total_mass: wp.array, sums: wp.array, second_moment: wp.array,
                           rigid: wp.array) -> None:  # fmt: skip
@@ -231,12 +232,14 @@ def integrate_overdamped_euler(forces, inverse_mass, rigid, inverse_drag: float,
                                                            worlds, int(move)], outputs=[x, v], device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_reference_ramp(start: wp.array, end: wp.array, fraction: float, out: wp.array) -> None:
     """out = start + fraction (end - start)."""
     wp.launch(reference_ramp_kernel, dim=len(out), inputs=[start, end, scalar_of(out)(fraction)], outputs=[out],
               device=out.device)  # fmt: skip
 
 
+@one_device
 def eval_trace_row(mass, x, c, origin: wp.array, worlds: int, threads: int, inverse_total_mass: wp.array, moment, row,
                    trace) -> None:  # fmt: skip
     """trace[row[w], 7w..] = [c_origin, centre of mass, x_origin] of every world w, row += 1 (device only)."""
@@ -247,6 +250,7 @@ def eval_trace_row(mass, x, c, origin: wp.array, worlds: int, threads: int, inve
               device=x.device)  # fmt: skip
 
 
+@one_device
 def eval_speed_runaway(v: wp.array, limit: float, worlds: int, flag: wp.array) -> None:
     """flag[w] = 1 where some |v_I| of world w passed `limit` or is NaN/Inf."""
     wp.launch(speed_runaway_kernel, dim=len(v), inputs=[v, scalar_of(v)(limit), worlds], outputs=[flag], device=v.device)

@@ -10,7 +10,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 from .contact import ground_motion, limit_transpose_at, spread_to_control_points
 from .limit_surface import basis_row
 from .reduce import REDUCTION_BLOCK, block_add
@@ -407,6 +407,7 @@ def solve_body_velocity(body: BodyFrame, points: wp.array, u: wp.array, response
                   outputs=[body.velocity], device=device)  # fmt: skip
 
 
+@one_device
 def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.array, scale: float, dt: float, mask,
                          patch: list, rest_area, points: wp.array, velocities: wp.array, response: wp.array,
                          others: wp.array, normal_force: wp.array, point_forces: wp.array, load: wp.array,
@@ -456,6 +457,7 @@ def eval_implicit_ground(ground, x: wp.array, v: wp.array, inverse_mass: wp.arra
               device=device)  # fmt: skip
 
 
+@one_device
 def eval_limit_sweeps(points: wp.array, velocities: wp.array, coupling: Coupling, laws: list, body: wp.array,
                       response: wp.array, normal_force: wp.array, forces: list, others: list) -> None:  # fmt: skip
     """The implicit contact's passes on the limit points (lab frame), one launch each: the first pass (responses,

@@ -15,7 +15,7 @@ from typing import Any
 
 import warp as wp
 
-from . import declare_overloads, scalar_of
+from . import declare_overloads, one_device, scalar_of
 
 RUNAWAY = wp.constant(1)  # flag codes; a later RUNAWAY overwrites FLIP_FLOP
 FLIP_FLOP = wp.constant(2)
@@ -236,6 +236,7 @@ declare_overloads(telegraph_recentre_kernel, acceleration="scalar[]", gamma2="sc
 # ---------------------------------------------------------------- launchers
 
 
+@one_device
 def eval_telegraph(acceleration: wp.array, gamma: float, alpha: float, dt: float, c: wp.array, v: wp.array) -> None:
     """One leapfrog step with centred damping (`telegraph_kernel`)."""
     s = scalar_of(c)
@@ -243,6 +244,7 @@ def eval_telegraph(acceleration: wp.array, gamma: float, alpha: float, dt: float
               outputs=[c, v], device=c.device)  # fmt: skip
 
 
+@one_device
 def eval_telegraph_recentre(acceleration: wp.array, gamma: float, alpha: float, old: float, new: float, v: wp.array):
     """The half-step velocity moved from t_n - old/2 to t_n - new/2 (`telegraph_recentre_kernel`)."""
     s = scalar_of(v)
@@ -250,6 +252,7 @@ def eval_telegraph_recentre(acceleration: wp.array, gamma: float, alpha: float, 
               outputs=[v], device=v.device)  # fmt: skip
 
 
+@one_device
 def eval_fhn_explicit(acceleration, mass, gamma: float, nu: float, kappa: float, epsilon: float, dt: float, c, w,
                       produced) -> None:  # fmt: skip
     """One explicit FitzHugh–Nagumo step (`fhn_explicit_kernel`)."""
@@ -259,18 +262,21 @@ def eval_fhn_explicit(acceleration, mass, gamma: float, nu: float, kappa: float,
               device=c.device)  # fmt: skip
 
 
+@one_device
 def eval_fhn_imex_rhs(c, w, mass, nu: float, dt: float, rhs, produced) -> None:
     """The IMEX step's right-hand side M (c + dt (f(c) - w)) (`fhn_imex_rhs_kernel`)."""
     s = scalar_of(c)
     wp.launch(fhn_imex_rhs_kernel, dim=len(c), inputs=[c, w, mass, s(nu), s(dt)], outputs=[rhs, produced], device=c.device)
 
 
+@one_device
 def eval_fhn_inhibitor(c, epsilon: float, kappa: float, dt: float, w) -> None:
     """The inhibitor implicit in w (`fhn_inhibitor_kernel`)."""
     s = scalar_of(c)
     wp.launch(fhn_inhibitor_kernel, dim=len(c), inputs=[c, s(epsilon), s(kappa), s(dt)], outputs=[w], device=c.device)
 
 
+@one_device
 def eval_flip(c, floor: float, hold: float, steps: int, previous, increment, earlier, streak, flag) -> None:
     """The period-2 flip-flop detector after a step (`flip_kernel`)."""
     s = scalar_of(c)
@@ -278,11 +284,13 @@ def eval_flip(c, floor: float, hold: float, steps: int, previous, increment, ear
               outputs=[previous, increment, earlier, streak, flag], device=c.device)  # fmt: skip
 
 
+@one_device
 def eval_transport(old_mass, mass, values) -> None:
     """Conservative transport of one array of amounts per unit area across a surface move (`transport_kernel`)."""
     wp.launch(transport_kernel, dim=len(values), inputs=[old_mass, mass], outputs=[values], device=values.device)
 
 
+@one_device
 def eval_runaway(values, limit: float, flag) -> None:
     """flag = RUNAWAY where |value| > limit or a value is NaN/Inf (`runaway_kernel`)."""
     wp.launch(runaway_kernel, dim=len(values), inputs=[values, scalar_of(values)(limit)], outputs=[flag],

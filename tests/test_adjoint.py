@@ -40,8 +40,8 @@ def parameters(*overrides):
 
 
 def settled(p, scene=SPHERE) -> WalkerRun:
-    mesh, options = scene.recipe(p, report=lambda message: None)
-    return WalkerRun("walker", mesh, p, report=lambda message: None, **options)
+    mesh, options = scene.recipe(p, device="cpu", report=lambda message: None)
+    return WalkerRun("walker", mesh, p, device="cpu", report=lambda message: None, **options)
 
 
 def walk_state(run) -> list:
@@ -90,8 +90,8 @@ def test_the_shells_rates_match_the_forces_and_their_differences_in_each_paramet
     x = mesh.vertices + 0.02 * rng.standard_normal(mesh.vertices.shape)
     c, direction = rng.uniform(0.0, 1.0, len(x)), rng.standard_normal(x.shape)
     shell = Shell(mesh, dtype="float64", device="cpu", **moduli)
-    rates = wp.zeros(1, dtype=ShellRates)
-    shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), rates)
+    rates = wp.zeros(1, dtype=ShellRates, device="cpu")
+    shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d, device="cpu"), rates)
     stretching, bending, volume, metric, curvature, per_excess = rates.numpy()[0]
     forces = direction_dot_forces(mesh, x, c, direction, **moduli)
     assert stretching + bending + volume == pytest.approx(-forces, rel=1e-12)
@@ -102,13 +102,14 @@ def test_the_shells_rates_match_the_forces_and_their_differences_in_each_paramet
         ends = [direction_dot_forces(mesh, x, c, direction, **{**moduli, name: moduli[name] + sign * delta})
                 for sign in (1.0, -1.0)]  # fmt: skip
         assert -rate == pytest.approx((ends[0] - ends[1]) / (2 * delta), rel=1e-6), name
-    for target in (shell.rest_volume, shell._volume_of(wp.array(x, dtype=wp.vec3d))):  # V̄, and V̄ = V(x) exactly
+    at_x = shell._volume_of(wp.array(x, dtype=wp.vec3d, device="cpu"))
+    for target in (shell.rest_volume, at_x):  # V̄, and V̄ = V(x) exactly
         ends = []
         for sign in (1.0, -1.0):
             shell.rest_volume = target + sign * 1e-6 * target
             ends.append(np.sum(shell.forces(x, c) * direction))
         shell.rest_volume = target
-        shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), rates)
+        shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d, device="cpu"), rates)
         assert rates.numpy()[0][5] == pytest.approx((ends[0] - ends[1]) / (2e-6 * target), rel=1e-6)
 
 
@@ -223,9 +224,9 @@ def whole_run_difference(p, base, name, relative, scene=SPHERE) -> float:
     delta = relative * (abs(theta) or 1.0)
     ends = []
     for sign in (1.0, -1.0):
-        mesh, options = scene.recipe(p, report=lambda message: None)
+        mesh, options = scene.recipe(p, device="cpu", report=lambda message: None)
         run = WalkerRun("walker", mesh, replace(p, **{name: theta + sign * delta}), mechanics_dt=base.settle_dt,
-                        report=lambda message: None, **options)  # fmt: skip
+                        device="cpu", report=lambda message: None, **options)  # fmt: skip
         ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
     return (ends[0] - ends[1]) / (2.0 * delta)
 
@@ -375,7 +376,8 @@ def test_the_cli_prints_the_adjoints_json_and_refuses_shape_points_in_the_body_f
     assert set(result["gradient"]) == {"AC", "AI"} and result["method"] == "adjoint" and not result["start_held"]
     assert all(math.isfinite(value) for value in result["gradient"].values())
     slope = [*sets, *[arg for item in [*COULOMB, "drag_frame=body", "slope=5"] for arg in ("--set", item)]]
-    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", *slope]) != 0
+    assert main(["grad", "sphere-walker", "--method", "adjoint", "--wrt", "AC", "--points", "1", "--device", "cpu",
+                 *slope]) != 0
     assert "slope=0 or drag_frame=lab" in capsys.readouterr().err
 
 
@@ -452,7 +454,8 @@ def test_inverse_design_by_the_reverse_mode_raises_the_walk_and_a_plain_run_conf
     body = ["--set", "slope=5", "--set", "contact_solve=implicit", "--set", "sharpness=inf", "--set",
             "drag_frame=body"]  # the rest shape's reverse mode refuses the body frame on a slope, before any run
     with pytest.raises(WalkerGradientError, match="drag_frame=lab"):
-        inverse_design(["--method", "adjoint", "--wrt", "AC", "--points", "0", "--out", str(tmp_path), *body])
+        inverse_design(["--method", "adjoint", "--wrt", "AC", "--points", "0", "--device", "cpu", "--out",
+                        str(tmp_path), *body])
 
 
 @pytest.mark.parametrize("fixture", ["half_period", "coulomb_half_period"])

@@ -30,8 +30,8 @@ def test_the_rest_forms_rates_match_central_differences_of_the_forces(model, for
     c, direction = rng.uniform(0.0, 1.0, len(x)), rng.standard_normal(x.shape)
     shell = Shell(mesh, 0.05, 3.0, AC=0.3, AI=0.7, volume_penalty=5.0, model=model, dtype="float64", device="cpu")
     points = shell.tables.n_quadrature_points
-    hats = {"metric": wp.zeros(points, dtype=MAT22), "curvature": wp.zeros(points, dtype=MAT22)}
-    shell.rest_forms_rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), hats["metric"],
+    hats = {form: wp.zeros(points, dtype=MAT22, device="cpu") for form in ("metric", "curvature")}
+    shell.rest_forms_rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d, device="cpu"), hats["metric"],
                                   hats["curvature"])  # fmt: skip
     rest = {"metric": shell.rest_metric, "curvature": shell.rest_curvature}[form]
     base, move, step = rest.numpy().copy(), symmetric(rng, points), 1e-5
@@ -52,12 +52,13 @@ def test_the_rest_forms_adjoint_matches_central_differences_of_the_limit_surface
     shell = Shell(mesh, 0.05, 3.0, dtype="float64", device="cpu")
     tables, points = shell.tables, shell.tables.n_quadrature_points
     metric_hat, curvature_hat = rng.standard_normal((points, 2, 2)), rng.standard_normal((points, 2, 2))
-    x_hat = wp.zeros(len(x), dtype=wp.vec3d)
-    eval_rest_forms_adjoint(wp.array(x, dtype=wp.vec3d), wp.array(metric_hat, dtype=MAT22),
-                            wp.array(curvature_hat, dtype=MAT22), tables, x_hat)  # fmt: skip
+    x_hat = wp.zeros(len(x), dtype=wp.vec3d, device="cpu")
+    eval_rest_forms_adjoint(wp.array(x, dtype=wp.vec3d, device="cpu"),
+                            *(wp.array(hat, dtype=MAT22, device="cpu") for hat in (metric_hat, curvature_hat)), tables,
+                            x_hat)
 
     def paired(x):
-        forms = evaluate(tables, wp.array(x, dtype=wp.vec3d))
+        forms = evaluate(tables, wp.array(x, dtype=wp.vec3d, device="cpu"))
         return np.sum(metric_hat * forms["metric"].numpy()) + np.sum(curvature_hat * forms["curvature"].numpy())
 
     direction, step = rng.standard_normal(x.shape), 1e-6

@@ -36,7 +36,7 @@ def shape_difference(p, mesh, options, base, direction, step) -> float:
     ends = []
     for sign in (1.0, -1.0):
         moved = Mesh(mesh.vertices + sign * step * direction, mesh.triangles)
-        run = WalkerRun("walker", moved, p, mechanics_dt=base.settle_dt, report=quiet, **options)
+        run = WalkerRun("walker", moved, p, mechanics_dt=base.settle_dt, device="cpu", report=quiet, **options)
         ends.append(WalkAdjoint(run).walk(run.frames * run.steps_per_frame))
     return (ends[0] - ends[1]) / (2.0 * step)
 
@@ -59,10 +59,10 @@ def test_the_rest_shapes_gradient_matches_central_differences_of_whole_runs_from
     that k and β are given per. δ is relative to R; the walk's contact switches (a point entering the
     contact) make J piecewise smooth, so the cells near one take a smaller step."""
     p = resolve(SPHERE.Parameters, {}, [*PAPER_WALK, *overrides])
-    mesh, options = SPHERE.recipe(p, report=quiet)
+    mesh, options = SPHERE.recipe(p, device="cpu", report=quiet)
     if noise:
         mesh = imperfect(mesh, noise * p.radius, 3)
-    run = WalkerRun("walker", mesh, p, report=quiet, **options)
+    run = WalkerRun("walker", mesh, p, device="cpu", report=quiet, **options)
     gradient = WalkAdjoint(run, rest_shape=True).gradient(run.frames * run.steps_per_frame, settle=True)["rest_shape"]
     direction = np.random.default_rng(1).standard_normal(mesh.vertices.shape)
     expected = shape_difference(p, mesh, options, run, direction, step * p.radius)
@@ -73,13 +73,13 @@ def test_the_rest_shapes_gradient_matches_central_differences_of_whole_runs_from
 def test_the_elongations_gradient_matches_central_differences_of_whole_runs():
     """dJ/ds of the stretch along the wave, from the rest shape's gradient, against whole runs at s ± δ."""
     p = resolve(SPHERE.Parameters, {}, [*PAPER_WALK, "elongation=1.2"])
-    mesh, options = SPHERE.recipe(p, report=quiet)
-    run = WalkerRun("walker", mesh, p, report=quiet, **options)
+    mesh, options = SPHERE.recipe(p, device="cpu", report=quiet)
+    run = WalkerRun("walker", mesh, p, device="cpu", report=quiet, **options)
     adjoint = WalkAdjoint(run, ["elongation"]).gradient(run.frames * run.steps_per_frame, settle=True)
     ends = []
     for sign in (1.0, -1.0):
         moved = WalkerRun("walker", mesh, replace(p, elongation=1.2 + sign * 1e-5), mechanics_dt=run.settle_dt,
-                          report=quiet, **options)  # fmt: skip
+                          device="cpu", report=quiet, **options)  # fmt: skip
         ends.append(WalkAdjoint(moved).walk(moved.frames * moved.steps_per_frame))
     assert adjoint["gradient"]["elongation"] == pytest.approx((ends[0] - ends[1]) / 2e-5, rel=1e-5)
 
@@ -107,10 +107,11 @@ def test_the_rigid_motions_mass_share_matches_central_differences_of_the_damping
     c, vbar, omega = rigid_rows(mass)
     rigid = np.zeros((5, 3))
     rigid[2], rigid[3], rigid[4] = c, vbar, omega
-    arrays = {name: wp.array(value, dtype=wp.vec3d) for name, value in (("x", x), ("v", v), ("w", w), ("rigid", rigid))}
-    sums, moment = wp.zeros(3, dtype=wp.vec3d), wp.zeros(1, dtype=wp.mat33d)
-    x_hat, v_hat = wp.zeros(n, dtype=wp.vec3d), wp.zeros(n, dtype=wp.vec3d)
-    masses, mass_hat = wp.array(mass, dtype=wp.float64), wp.zeros(n, dtype=wp.float64)
+    arrays = {name: wp.array(value, dtype=wp.vec3d, device="cpu")
+              for name, value in (("x", x), ("v", v), ("w", w), ("rigid", rigid))}
+    sums, moment = wp.zeros(3, dtype=wp.vec3d, device="cpu"), wp.zeros(1, dtype=wp.mat33d, device="cpu")
+    x_hat, v_hat = wp.zeros(n, dtype=wp.vec3d, device="cpu"), wp.zeros(n, dtype=wp.vec3d, device="cpu")
+    masses, mass_hat = wp.array(mass, dtype=wp.float64, device="cpu"), wp.zeros(n, dtype=wp.float64, device="cpu")
     eval_damping_adjoint(arrays["w"], arrays["x"], arrays["v"], masses, arrays["rigid"], mass.sum(), rate, sums, moment,
                          x_hat, v_hat)  # fmt: skip
     eval_rigid_motion_mass_share(arrays["x"], arrays["v"], arrays["rigid"], sums, mass.sum(), rate, mass_hat)
@@ -139,8 +140,8 @@ def test_the_rest_shapes_gradient_is_the_whole_runs():
     p = resolve(SPHERE.Parameters, {}, PAPER_WALK)
     with pytest.raises(WalkerGradientError, match="drop --hold-start"):
         walker_adjoint_gradient(SPHERE, p, [], points=[0], hold_start=True, device="cpu", report=quiet)
-    mesh, options = SPHERE.recipe(p, report=quiet)
-    run = WalkerRun("walker", mesh, p, report=quiet, **options)
+    mesh, options = SPHERE.recipe(p, device="cpu", report=quiet)
+    run = WalkerRun("walker", mesh, p, device="cpu", report=quiet, **options)
     with pytest.raises(WalkerGradientError, match="settle=True"):
         WalkAdjoint(run, rest_shape=True).gradient(2)
 
@@ -165,8 +166,8 @@ def test_the_parameters_gradient_reads_the_same_twice():
     """The rest shape reads the parameters' sums again after the result (the contact area's and the drag's shares):
     the reading must leave them as summed (on the CPU an array's NumPy view is its memory)."""
     p = resolve(SPHERE.Parameters, {}, [*PAPER_WALK, *COULOMB, "contact=area"])
-    mesh, options = SPHERE.recipe(p, report=quiet)
-    run = WalkerRun("walker", mesh, p, report=quiet, **options)
+    mesh, options = SPHERE.recipe(p, device="cpu", report=quiet)
+    run = WalkerRun("walker", mesh, p, device="cpu", report=quiet, **options)
     adjoint = WalkAdjoint(run, ["stiffness", "contact_damping", "drag"])
     result = adjoint.gradient(run.frames * run.steps_per_frame)
     assert adjoint._named_gradient() == result["gradient"] == adjoint._named_gradient()

@@ -40,11 +40,11 @@ def test_the_forms_position_adjoint_matches_central_differences(floor):
         operator.j_floor.assign(10.0 * np.ones(operator.tables.n_quadrature_points))
     u, v, m = (rng.standard_normal(len(x)) for _ in range(3))
     direction = rng.standard_normal(x.shape)
-    x_hat = wp.zeros(len(x), dtype=wp.vec3d)
-    arrays = [wp.array(a, dtype=wp.float64) for a in (u, v, m)]
+    x_hat = wp.zeros(len(x), dtype=wp.vec3d, device="cpu")
+    arrays = [wp.array(a, dtype=wp.float64, device="cpu") for a in (u, v, m)]
     operator.update(x)
-    eval_operator_position_adjoint(wp.array(x, dtype=wp.vec3d), *arrays, 0.7, -1.3, operator.tables, operator.j_floor,
-                                   x_hat)  # fmt: skip
+    eval_operator_position_adjoint(wp.array(x, dtype=wp.vec3d, device="cpu"), *arrays, 0.7, -1.3, operator.tables,
+                                   operator.j_floor, x_hat)
     step = 1e-6
     ends = [forms(operator, x + sign * step * direction, u, v, m, 0.7, -1.3) for sign in (1.0, -1.0)]
     assert np.sum(x_hat.numpy() * direction) == pytest.approx((ends[0] - ends[1]) / (2 * step), rel=1e-7)
@@ -72,9 +72,9 @@ def test_one_wave_step_backwards_matches_central_differences(transport, correcti
     adjoint = WaveAdjoint(SimpleNamespace(solver=solver, operator=operator, dt=0.4), operator.tables)
     adjoint.c_hat.assign(a)
     adjoint.w_hat.assign(b)
-    x_hat, x_next_hat = wp.zeros(len(x), dtype=wp.vec3d), wp.zeros(len(x), dtype=wp.vec3d)
-    arrays = [wp.array(values, dtype=wp.float64) for values in (c, w)]
-    positions = [wp.array(values, dtype=wp.vec3d) for values in (x, x_next)]
+    x_hat, x_next_hat = (wp.zeros(len(x), dtype=wp.vec3d, device="cpu") for _ in range(2))
+    arrays = [wp.array(values, dtype=wp.float64, device="cpu") for values in (c, w)]
+    positions = [wp.array(values, dtype=wp.vec3d, device="cpu") for values in (x, x_next)]
     adjoint.recompute(*arrays, positions[0])
     adjoint.transport_back(positions[1], x_next_hat)
     adjoint.step_back(arrays[0], positions[0], x_hat)
@@ -100,11 +100,12 @@ def test_the_references_concentration_adjoint_matches_central_differences_of_the
     shell = Shell(mesh, 0.05, 3.0, AC=0.3, AI=0.7, volume_penalty=5.0, model=model, dtype="float64", device="cpu")
     c, direction, e = rng.uniform(0.0, 1.0, len(x)), rng.standard_normal(x.shape), rng.standard_normal(len(x))
     points = shell.tables.n_quadrature_points
-    by = (wp.zeros(points, dtype=wp.vec3d), wp.zeros(points, dtype=wp.vec3d))
-    shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d), wp.zeros(1, dtype=ShellRates), by, 0.25)
+    by = (wp.zeros(points, dtype=wp.vec3d, device="cpu"), wp.zeros(points, dtype=wp.vec3d, device="cpu"))
+    shell.rates_device(shell._set(x, c), wp.array(direction, dtype=wp.vec3d, device="cpu"),
+                       wp.zeros(1, dtype=ShellRates, device="cpu"), by, 0.25)
     gathered = []
     for values in by:
-        out = wp.zeros(len(x), dtype=wp.float64)
+        out = wp.zeros(len(x), dtype=wp.float64, device="cpu")
         eval_gather_point_factors(values, shell.tables, wp.empty_like(out), out)
         gathered.append(out.numpy())
     step = 1e-6

@@ -160,7 +160,7 @@ def test_a_batch_refuses_worlds_that_differ_in_a_shared_parameter():
         scene.build_batch([ps[0], replace(ps[0], gamma=0.3)], seeds=[0, 0], device="cpu")
     assert "mu_v, noise, elongation, mirror (and the seed)" in str(walker.value)
     quasi_static = resolve(load_scene("buckling-modes").Parameters, None, [])
-    with pytest.raises(ValueError, match="but young, thickness, AC, AI, mu_v, noise \\(and the seed\\)"):
+    with pytest.raises(ValueError, match="but young, tau_m, thickness, AC, AI, mu_v, noise \\(and the seed\\)"):
         check_batch([quasi_static, replace(quasi_static, gamma=0.3)])  # names only the scene's own
 
 

@@ -60,7 +60,8 @@ def test_kill_9_then_resume_gives_the_uninterrupted_run(tmp_path, capsys):
     with h5py.File(part, "r") as f:
         assert f["frames"].attrs["complete"] == written == len(f["frames/time"])
     leftovers = [name for name in os.listdir(tmp_path) if name.startswith(".part.usda.")]
-    assert len(leftovers) == 1  # the killed process's USD, never renamed into place
+    # the killed process's USD, never renamed into place, and its lock file (no lock is held after a kill)
+    assert sorted(name.endswith(".lock") for name in leftovers) == [False, True]
     resumed = summary(capsys, "cube-waves", "--resume", "--device", "cpu", "--json", "--out", str(tmp_path / "part.usda"))
     assert not [name for name in os.listdir(tmp_path) if name.startswith(".part.usda.")]  # removed as stale
     with h5py.File(tmp_path / "full_trajectory.h5", "r") as a, h5py.File(part, "r") as b:

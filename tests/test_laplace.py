@@ -222,7 +222,7 @@ def test_flux_metric_keeps_its_area_element_above_a_hundredth_of_the_rest_one(sq
         (lambda op: op.update(np.ones((42, 2))), r"x must have shape \(42, 3\)"),
         (lambda op: LaplaceBeltrami(op.mesh, discretization="fem", **F64), "discretization must be one of"),
         (lambda op: LaplaceBeltrami(op.mesh.vertices, **F64), "mesh must be a wavewarp.mesh.Mesh"),
-        (lambda op: LaplaceBeltrami(op.mesh, dtype="float16"), "dtype must be"),
+        (lambda op: LaplaceBeltrami(op.mesh, device="cpu", dtype="float16"), "dtype must be"),
     ],
 )
 def test_bad_input_names_the_argument(call, message):

@@ -27,7 +27,7 @@ def refuse_build(monkeypatch, module):
 
 
 def test_size_guard_refuses_level_12_before_building(tmp_path, capsys):
-    assert cli.main(["run", "starfish", "--set", "level=12", "--out", str(tmp_path / "s.usda")]) == 2
+    assert cli.main(["run", "starfish", "--device", "cpu", "--set", "level=12", "--out", str(tmp_path / "s.usda")]) == 2
     message = capsys.readouterr().err
     assert "level=12 makes 335,544,320 triangles" in message and "the largest level that fits is" in message
     assert os.listdir(tmp_path) == []
@@ -92,7 +92,7 @@ def test_odd_divisions_are_refused_not_rounded():
                                           ("{tmp}", "it is a folder")])  # fmt: skip
 def test_path_errors_name_the_users_path_before_the_scene_is_built(monkeypatch, tmp_path, capsys, out, message):
     refuse_build(monkeypatch, starfish)
-    assert cli.main(["run", "starfish", "--quick", "--out", out.format(tmp=tmp_path)]) == 2
+    assert cli.main(["run", "starfish", "--quick", "--device", "cpu", "--out", out.format(tmp=tmp_path)]) == 2
     assert message.format(tmp=tmp_path) in capsys.readouterr().err
 
 

@@ -195,8 +195,8 @@ def test_a_float32_shell_is_finished_on_a_float64_twin():
 def test_quasi_static_counts_the_newton_finishes():
     mesh = icosphere(1.0, 2)
     c0 = np.full(mesh.n_vertices, 1.0)
-    shell = Shell(mesh, thickness=0.05, young=1.0, AC=0.3, AI=0.5, **F64)
-    run = QuasiStatic(shell, Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=c0), max_iterations=3)
+    shell = Shell(mesh, thickness=0.05, young=1.0, AC=0.3, AI=0.5, device="cpu", **F64)
+    run = QuasiStatic(shell, Telegraph(LaplaceBeltrami(mesh, device="cpu", **F64), 1.0, c0=c0), max_iterations=3)
     assert run.newton_finishes == 1 and run.unconverged == 0
     assert np.linalg.norm(shell.forces(run.positions(), c0), axis=1).max() / shell.force_scale() <= run.tol
 

@@ -67,7 +67,7 @@ def test_friction_holds_a_box_on_a_slope_only_below_mu(tan_theta, holds):
     slides: the relaxation cannot converge)."""
     mesh = cube(2.0, 4)
     shell = Shell(mesh, 0.2, 100.0, device="cpu", **F64)  # stiff: the faces do not cave in under the weight
-    x = mesh.vertices - np.array([0.0, 0.0, limit_positions(mesh, **F64)[:, 2].min() + 0.002])
+    x = mesh.vertices - np.array([0.0, 0.0, limit_positions(mesh, device="cpu", **F64)[:, 2].min() + 0.002])
     epsilon, mu = 1e-7, 0.1
     options = dict(stiffness=STIFFNESS, density=DENSITY, friction=mu, smoothing=epsilon)
     flat = RestingGround(shell, gravity=G, **options)
@@ -116,7 +116,8 @@ def test_quasi_static_steps_begin_where_the_last_equilibrium_left_the_shell():
     shell = Shell(mesh, 0.1, 1.0, AC=0.2, device="cpu", **F64)
     ground = RestingGround(shell, stiffness=STIFFNESS, density=DENSITY, gravity=G, friction=0.1, smoothing=1e-6)
     shell.terms = (ground,)
-    wave = Telegraph(LaplaceBeltrami(mesh, **F64), 1.0, c0=np.full(mesh.n_vertices, 1.0))  # K·1 = 0: c stays 1
+    # K·1 = 0: c stays 1
+    wave = Telegraph(LaplaceBeltrami(mesh, device="cpu", **F64), 1.0, c0=np.full(mesh.n_vertices, 1.0))
     run = QuasiStatic(shell, wave, sensitive=False, x0=mesh.vertices + np.array([0.0, 0.0, 0.998]), method="ncg",
                       tol=1e-10)  # fmt: skip
     before = run.positions()

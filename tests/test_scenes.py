@@ -87,7 +87,7 @@ def assert_resumed_run_equals(capsys, scene, full, part, keep, older=()):
     assert code == 0, err
     with h5py.File(full, "r") as a, h5py.File(part, "r") as b:
         for name in a["frames"]:
-            np.testing.assert_allclose(b["frames"][name][...], a["frames"][name][...], rtol=0, atol=1e-12)
+            np.testing.assert_array_equal(b["frames"][name][...], a["frames"][name][...], err_msg=name)
         assert json.loads(b.attrs["measurements"]) == json.loads(a.attrs["measurements"])  # the bookkeeping too
 
 
@@ -486,6 +486,9 @@ def test_scene_defaults_are_the_accuracy_benchmarks_recommendation(scene):
     """Issue 7, docs/theory/scenes.md ("the coarsest resolution that meets its accuracy"): every default the accuracy
     benchmark sweeps is the committed full run's `scene_settings` (BENCHMARKS.md#accuracy-against-cost), but for
     the stated DEPARTURES: a new result or a changed default fails here until the other follows."""
+    if not os.path.isfile(ACCURACY):
+        pytest.skip(f"the committed accuracy result {os.path.normpath(ACCURACY)} is absent (wavewarp bench accuracy "
+                    "writes it)")
     with open(ACCURACY) as f:
         result = json.load(f)
     assert not result["quick"]

@@ -24,7 +24,7 @@ def squashed(mesh, factor):
 
 def brute_force_energy(mesh, x, contact):
     """½ Σ_q Σ_o w_q w_o A (d/r - 1)³ over every pair of quadrature points (no grid, no candidate list)."""
-    rest, now = limit_surface(mesh, **F64), limit_surface(mesh, x, **F64)
+    rest, now = limit_surface(mesh, device="cpu", **F64), limit_surface(mesh, x, device="cpu", **F64)
     p, w = now.points, rest.area
     r = np.linalg.norm(p[:, None] - p[None], axis=2)
     far = np.linalg.norm(rest.points[:, None] - rest.points[None], axis=2) >= contact.exclusion
@@ -126,7 +126,7 @@ def test_relaxation_keeps_an_everting_cap_out_of_the_far_side():
             x = shell.relax(x, (mesh.vertices[:, 2] > z0).astype(float), tol=1e-6, max_iterations=5000)
             if with_contact:  # the cap moves by many skins: the loop stopped for new searches and went on
                 assert shell.self_contact.searches > 2 and len(shell.relax_history) > 1
-        limit = limit_positions(mesh, x, **F64)
+        limit = limit_positions(mesh, x, device="cpu", **F64)
         gaps[with_contact] = limit[top, 2] - limit[bottom, 2]
     assert gaps[False] < -0.1  # through the far side
     assert 0.5 * h < gaps[True] < 1.2 * h

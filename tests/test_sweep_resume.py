@@ -40,13 +40,15 @@ def killed_after(monkeypatch, cls, frames: int) -> list:
 
 
 def assert_same_points(a, b, points) -> None:
-    """Each point's result (but wall time and the resume's note) and trajectory equal in folders a and b."""
+    """Each point's result (but wall time, the resume's note and which sweep wrote it) and trajectory equal in
+    folders a and b."""
     for point in points:
         results = []
         for folder in (a, b):
             with open(folder / "points" / f"{point.name}.json") as f:
                 result = json.load(f)
             result.pop("wall_time_s")
+            result.pop("invocation")
             result.get("batch", {}).pop("resumed_after_frames", None)
             result.pop("resumed_after_frames", None)
             results.append(result)

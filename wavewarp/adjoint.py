@@ -43,6 +43,7 @@ from .coupled import GRAPH_SUBSTEPS
 from .device import mat22, run_steps
 from .gradients import control_points
 from .initial import gaussian_pulse_adjoint
+from .kernels import check_one_device
 from .kernels.adjoint import (
     ShellRates,
     eval_area_scale,
@@ -139,6 +140,7 @@ class WalkAdjoint(SettlingAdjoint, RestShapeAdjoint):
     def __init__(self, run, wrt=(), checkpoint_every=None, rest_forms: bool = False, rest_shape: bool = False):
         check_adjoint_walk(run.p, wrt)
         check_adjoint_shell(run.shell)
+        check_one_device("WalkAdjoint", shell=run.shell, operator=run.operator, wave=run.wave.c, x=run.dynamics.state.x)
         rest_shape = rest_shape or any(name in SHAPE_PARAMETERS for name in wrt)
         if rest_shape:
             check_rest_shape(run.p)

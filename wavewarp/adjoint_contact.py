@@ -30,6 +30,7 @@ from dataclasses import replace
 import warp as wp
 
 from .geometry import limit_coupling
+from .kernels import check_one_device, one_device_methods
 from .kernels.adjoint import eval_add, eval_coupling_transpose, eval_weighted_dot
 from .kernels.adjoint_contact import (
     eval_body_step_adjoint,
@@ -60,13 +61,16 @@ from .kernels.implicit_contact import (
 from .kernels.reduce import REDUCTION_BLOCK
 
 
+@one_device_methods("forward", "backward")
 class ImplicitContactAdjoint:
     """The implicit contact of `solver` (an InertialSolver or OverdampedSolver with Ground(solve="implicit"), the drag
     in the lab or the body frame, one world, float64): `forward(x, v_star, scale, dt)` solves it again storing every
     sweep (and every body velocity), `backward(force_hat, ...)` takes it back."""
 
     def __init__(self, solver):
+        check_one_device("ImplicitContactAdjoint", solver=solver, mask=solver.mask, mass=solver.inverse_mass)
         self.solver, self.ground, self.mask = solver, solver.ground, solver.mask
+        self.device = solver.device
         self.point = self.ground.contact == "point"
         self.patch, area = solver.ground_tables()
         self.tables = ([self.mask.ring_start, self.mask.ring, self.mask.centre_weight, self.mask.ring_weight]

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from .kernels import check_one_device, one_device_methods
 from .kernels.adjoint_wave import (
     eval_add_scaled,
     eval_divide_adjoint,
@@ -30,12 +31,14 @@ from .kernels.laplace import divide_kernel, richardson_kernel
 from .kernels.waves import eval_fhn_explicit
 
 
+@one_device_methods("recompute", "transport_back", "step_back")
 class WaveAdjoint:
     """The running adjoints ĉ, ŵ of a `FitzHughNagumo` stepper's explicit steps (module docstring); `shell_tables`: the
     shell's quadrature (its reference's points, where the mechanics hand back ĉ); `moving`: the operator follows the
     shell (the sensitive wave), else it stays on the rest surface."""
 
     def __init__(self, wave, shell_tables, moving: bool = True):
+        check_one_device("WaveAdjoint", wave=wave.operator, shell_tables=shell_tables)
         self.solver, self.operator = wave.solver, wave.operator
         self.dt = wave.dt
         self.shell_tables = shell_tables
@@ -54,6 +57,7 @@ class WaveAdjoint:
             self.by_concentration = (wp.zeros(points, dtype=vec3), wp.zeros(points, dtype=vec3))  # (s₀, 0, 0)
         shell_tables.vertex_entries()  # built on first use: here, not inside a captured graph
 
+    device = property(lambda self: self.operator.device)
     c_hat = property(lambda self: self.v["c_hat"])
     w_hat = property(lambda self: self.v["w_hat"])
     c_tilde = property(lambda self: self.v["c_tilde"])

@@ -29,8 +29,8 @@ from .measurements import BodyRotation, locomotion
 from .mesh import Mesh
 from .parameters import as_dict
 from .runs import WaveClock, imperfect, mean_edge
-from .walker import (AUTO_DT_SAFETY, TRACE_COLUMNS, place_walker, restore_walk, settled_walker_dynamics,
-                     walker_model)
+from .walker import (AUTO_DT_SAFETY, TRACE_COLUMNS, check_walker_steps, place_walker, restore_walk,
+                     settled_walker_dynamics, walker_model)
 
 PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "tau_m", "mirror", "noise", "elongation")  # and the seed: the rest is shared
 
@@ -117,6 +117,7 @@ class WalkerBatch(WorldsRun):
         if len(meshes) != len(ps):
             raise ValueError(f"a batch needs one mesh per world: {len(meshes)} meshes for {len(ps)} parameter sets")
         p = ps[0]
+        check_walker_steps(p)
         placed = [place_walker(mesh, q, origin) for mesh, q in zip(meshes, ps)]
         if len({pl.ground for pl in placed}) > 1:
             raise ValueError("the worlds' grounds differ (the area contact's automatic area per point follows each "

@@ -17,26 +17,22 @@ import warp as wp
 from wavewarp.benchmarks import NAMES as BENCHMARKS
 
 from .version import __version__
-from .driver import simulate
-from .device import resolve_device, set_deterministic
-from .geometry import limit_positions
+from .driver import interrupt_signal, terminate
+from .device import resolve_device
 from .gradients import OBJECTIVES, PARAMETERS, check_differentiable, scene_gradient
 from .walker import WalkerParameters
 from .walker_gradients import OBJECTIVES as WALKER_OBJECTIVES, PARAMETERS as WALKER_PARAMETERS, STEPS as WALKER_STEPS
 from .walker_gradients import AGREEMENT, WalkerGradientError, walker_gradient
 from .adjoint import ADJOINT_PARAMETERS, walker_adjoint_gradient
-from .io import check_writable
 from .mesh import cube, icosphere, load, prism
-from .parameters import help_lines, load_scene, resolve, resumed, scene_descriptions
+from .parameters import help_lines, load_scene, resolve, scene_descriptions
 from .precompile import precompile
 from .relax import RelaxationError
 from .sizing import check_run_size
 from .sweep import SweepSpec, local_cluster, parse_grid, sweep
 from .render import render
-from .trajectory import TrajectoryWriter, read_frames, stored_parameters
-from .usd import UsdAnimation
+from .run_command import scene_run
 from .waves import BlowUpError
-from .xdmf import XdmfWriter
 
 
 def _list(args) -> int:
@@ -45,80 +41,10 @@ def _list(args) -> int:
     return 0
 
 
-def _parameters(module, args, h5: str):
-    """The run's parameters: the scene's, or on --resume the ones stored in the trajectory `h5`."""
-    if not args.resume:
-        return resolve(module.Parameters, getattr(module, "QUICK", {}) if args.quick else None, args.set)
-    if not os.path.isfile(h5):
-        raise ValueError(f"--resume continues the trajectory {h5!r}, which does not exist: pass --h5 FILE.h5, the "
-                         "trajectory of the run to continue")  # fmt: skip
-    if args.set:
-        raise ValueError(f"--set cannot be combined with --resume: the run continues with the parameters stored in {h5}")
-    return resumed(module.Parameters, stored_parameters(h5))
-
-
-def _scene_run(args) -> int:
-    wp.config.log_level = wp.LOG_WARNING
-    start = time.perf_counter()
-    module = load_scene(args.scene)
-    if args.help_parameters:
-        print("\n".join(help_lines(module.Parameters)))
-        return 0
-    resolve_device(args.device)  # an unavailable device is refused before anything is built
-    set_deterministic(args.deterministic)
-    out = args.out or f"{module.NAME}.usda"
-    h5_path = args.h5 or f"{os.path.splitext(out)[0]}_trajectory.h5"
-    p = _parameters(module, args, h5_path)
-    for path in [out, h5_path] + ([args.xdmf] if args.xdmf else []):
-        check_writable(path)
-    if args.xdmf:
-        if not args.xdmf.endswith(".xdmf"):
-            raise ValueError(f"XDMF output {args.xdmf!r} must end in .xdmf")
-        sidecar = os.path.splitext(args.xdmf)[0] + ".h5"
-        if os.path.abspath(sidecar) == os.path.abspath(h5_path):
-            raise ValueError(f"--xdmf {args.xdmf} keeps its data in {sidecar}, the --h5 file: choose another name")
-    replay = read_frames(h5_path) if args.resume else ()
-
-    def report(message):
-        print(f"wavewarp run {module.NAME}: {message}", file=sys.stderr)
-
-    run = module.build(p, mesh=load(args.mesh) if args.mesh else None, device=args.device, seed=args.seed, report=report)
-    usd = UsdAnimation(out, run.mesh.triangles, field_name="concentration", surface=args.usd_surface,
-                       bake_levels=args.usd_bake_levels, ground_size=getattr(run, "ground_size", 0.0))  # fmt: skip
-    h5 = TrajectoryWriter(h5_path, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices, series=run.series,
-                          scene=module.NAME, parameters=run.resolved, device=str(run.shell.device),
-                          resume=args.resume)  # fmt: skip
-    writers, replay_writers = [usd, h5], [usd]
-    if args.xdmf:
-        device = run.operator.device
-
-        def limit_points(x):
-            return limit_positions(run.mesh, x, device=device, dtype="float64")
-
-        xdmf = XdmfWriter(args.xdmf, triangles=run.mesh.triangles, rest_points=limit_points(run.mesh.vertices),
-                          limit_points=limit_points, field_values=run.operator.field_values)  # fmt: skip
-        writers.append(xdmf)
-        replay_writers.append(xdmf)
-    outcome = simulate(run, writers, progress=sys.stderr.isatty(), replay=replay, replay_writers=replay_writers,
-                       figures_stem=os.path.splitext(out)[0],
-                       on_measured=h5.set_measurements)  # fmt: skip
-    outputs = [out, h5_path] + ([args.xdmf] if args.xdmf else []) + outcome.figures
-    summary = {"scene": module.NAME, "device": str(run.shell.device), "steps": run.steps, "frames": outcome.frames,
-               "wall_time_s": time.perf_counter() - start, "outputs": outputs, "interrupted": outcome.interrupted,
-               "stopped": outcome.failure, **outcome.measurements}  # fmt: skip
-    if args.json:
-        print(json.dumps(summary))
-    if outcome.failure:
-        print(f"wavewarp run {module.NAME}: {outcome.failure}; kept the {outcome.frames} frames before it", file=sys.stderr)
-        return 1
-    if not args.json:
-        state = "interrupted; kept" if outcome.interrupted else "wrote"
-        print(f"{state} {outcome.frames} frames to {', '.join(outputs)} ({summary['wall_time_s']:.1f} s, {run.steps} wave steps)")
-    return 130 if outcome.interrupted else 0
-
-
 def _sweep(args) -> int:
     wp.config.log_level = wp.LOG_WARNING
+    if args.device is not None:
+        resolve_device(args.device)  # as `run` does: no --device cuda without a GPU
     spec = SweepSpec(args.scene, grid=parse_grid(args.grid), seeds=args.seeds, first_seed=args.first_seed,
                      fixed=tuple(args.set), quick=args.quick, device=args.device, h5=args.h5, measure=args.measure,
                      deterministic=args.deterministic)  # fmt: skip
@@ -129,16 +55,24 @@ def _sweep(args) -> int:
 
     rows = sweep(spec, args.out, batch=args.batch, workers=args.workers, scheduler=args.scheduler,
                  progress=sys.stderr.isatty(), report=report)  # fmt: skip
-    counts = {status: sum(row["status"] == status for row in rows) for status in ("done", "stopped", "failed")}
-    print(f"{len(rows)} points in {args.out} ({', '.join(f'{n} {s}' for s, n in counts.items())}): table.csv, chart.png "
-          f"({time.perf_counter() - start:.1f} s)")  # fmt: skip
-    return 0
+    for point, error in rows.failures.items():
+        report(f"point {point} failed: {' '.join(str(error).split())}")
+    if args.json:
+        print(json.dumps(rows.summary()))
+    else:
+        counts = {status: sum(row["status"] == status for row in rows) for status in ("done", "stopped", "failed")}
+        print(f"{len(rows)} points in {args.out} ({', '.join(f'{n} {s}' for s, n in counts.items())}): table.csv, "
+              f"chart.png ({time.perf_counter() - start:.1f} s); this sweep computed {rows.computed}, skipped "
+              f"{rows.skipped}, failed {len(rows.failures)}")
+    return 1 if rows.failures else 0
 
 
 def _cluster(args) -> int:
     """A local Dask cluster kept running for sweeps (`--scheduler ADDRESS`) until interrupted: its workers
     start, import and load their kernels once, not once per sweep."""
     wp.config.log_level = wp.LOG_WARNING
+    if args.device is not None:
+        resolve_device(args.device)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     with local_cluster(args.device, args.workers, args.port) as cluster:
@@ -216,6 +150,12 @@ def scene_epilog(argv) -> str | None:
     quick = ", ".join(f"{k}={v}" for k, v in getattr(module, "QUICK", {}).items())
     return (f"{module.NAME}: {getattr(module, 'DESCRIPTION', '')}\n\nits parameters (--set NAME=VALUE; "
             f"NAME=auto where a value is automatic):\n{lines}" + (f"\n\n--quick sets {quick}" if quick else ""))  # fmt: skip
+
+
+def _port(text: str) -> int:
+    if not text.isdigit() or int(text) > 65535:
+        raise argparse.ArgumentTypeError(f"must be a port number from 0 to 65535 (0: any free one), got {text!r}")
+    return int(text)
 
 
 def _refinements(text: str) -> int:
@@ -346,11 +286,15 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     run.add_argument("--xdmf", default=None, help="also write frames for ParaView (FILE.xdmf + FILE.h5)")
     run.add_argument("--mesh", default=None, help="any closed triangle mesh file in place of the scene's surface")
     run.add_argument("--quick", action="store_true", help="a reduced run for smoke tests (under a minute on a CPU)")
-    run.add_argument("--seed", type=int, default=0, help="seed of the scene's random perturbations")
-    run.add_argument("--resume", action="store_true", help="continue the run stored in --h5")
+    run.add_argument("--seed", type=int, default=None,
+                     help="seed of the scene's random perturbations (default 0; with --resume, the stored run's)")
+    run.add_argument("--resume", action="store_true", help="continue the run stored in --h5 (refused where the "
+                     "file holds another run; a finished run's file is left as it is)")
+    run.add_argument("--overwrite", action="store_true",
+                     help="replace output files that exist (without it, a run refuses to)")
     run.add_argument("--json", action="store_true", help="print one JSON object with the results")
     _deterministic_argument(run)
-    run.set_defaults(run=_scene_run)
+    run.set_defaults(run=scene_run)
     grid = commands.add_parser("sweep", help="run a scene over a grid of parameter values and seeds (Dask)")
     grid.add_argument("scene", help="a scene name (wavewarp list) or the path of a scene script")
     grid.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2,...",
@@ -374,6 +318,8 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
                       help="also keep every point's trajectory (DIR/points/*.h5), frame by frame: a batch killed "
                       "part-way goes on from its last stored frame when the sweep is run again")  # fmt: skip
     grid.add_argument("--measure", default=None, help="the measurement the chart shows (default: the first that varies)")
+    grid.add_argument("--json", action="store_true",
+                      help='print one JSON object: {"computed", "skipped", "failed"} (counts) and "failures"')
     _deterministic_argument(grid)
     grid.set_defaults(run=_sweep)
     grad = commands.add_parser("grad", help="gradient of a scene's objective with respect to shell parameters: a "
@@ -415,7 +361,8 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
     cluster.add_argument("--device", default=None, choices=("cpu", "cuda"),
                          help="cpu, or cuda (one worker per GPU); default: CUDA when present")  # fmt: skip
     cluster.add_argument("--workers", type=int, default=None, help="CPU workers (default: one per core)")
-    cluster.add_argument("--port", type=int, default=8786, help="the scheduler's port (default 8786; 0: any free one)")
+    cluster.add_argument("--port", type=_port, default=8786,
+                         help="the scheduler's port (default 8786; 0: any free one)")
     cluster.set_defaults(run=_cluster)
     ahead = commands.add_parser("precompile", help="compile the CUDA kernels into Warp's kernel cache ahead of time "
                                 "(no GPU needed): GPU machines and sweep workers given the cache load them instead")  # fmt: skip
@@ -444,14 +391,23 @@ def parser(scene_help: str | None = None) -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parser(scene_epilog(argv)).parse_args(argv)
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, terminate) if main_thread and args.command != "cluster" else None
     try:
-        return args.run(args)
+        return args.run(args, argv) if args.run is scene_run else args.run(args)
     except (ValueError, OSError) as error:
         print(f"wavewarp {args.command}: {error}", file=sys.stderr)
         return 2
     except (BlowUpError, RelaxationError) as error:  # a solver failed before the first frame
         print(f"wavewarp {args.command}: {error}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt as error:  # Ctrl-C or SIGTERM outside a run's frames: nothing was written
+        code = interrupt_signal(error)
+        print(f"wavewarp {args.command}: stopped by {signal.Signals(code).name}", file=sys.stderr)
+        return 128 + code
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -7,9 +7,10 @@ A run (wavewarp/runs.py) advances by frames; every writer (USD, HDF5, XDMF) take
 `add_frame(time, frame)` and is a context manager that keeps its file consistent: written
 atomically, with the frames so far kept after Ctrl-C or a solver's failure. A failure of the run
 (a blow-up, a relaxation that cannot converge, a time step past its bound) ends the loop with the
-frames before it kept and the reason in `Outcome.failure`. Resuming replays the stored frames into
-the run's figures and measurements (and into the writers that do not hold them) and restores the
-run's state from the last one.
+frames before it kept and the reason in `Outcome.failure`; so does a frame the disk cannot take (a
+full disk: the frames before it stay in the files, and the run can be resumed once there is room).
+Resuming replays the stored frames into the run's figures and measurements (and into the writers that
+do not hold them) and restores the run's state from the last one.
 """
 
 from __future__ import annotations
@@ -37,10 +38,25 @@ class Outcome:
     figures: list = field(default_factory=list)
     failure: str | None = None
     interrupted: bool = False
+    signal: int = signal.SIGINT  # the signal that interrupted the run (its exit code: 128 + it)
 
 
-def _terminate(signum, frame):
-    raise KeyboardInterrupt
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (or another stopping signal), raised where the interpreter was: stops a run as Ctrl-C does."""
+
+    def __init__(self, signum: int = signal.SIGTERM):
+        super().__init__(f"stopped by signal {signum}")
+        self.signum = int(signum)
+
+
+def terminate(signum, frame):
+    """The SIGTERM handler of a run: raise Terminated."""
+    raise Terminated(signum)
+
+
+def interrupt_signal(error: KeyboardInterrupt) -> int:
+    """The signal behind an interrupt: SIGTERM for Terminated, else SIGINT (Ctrl-C)."""
+    return error.signum if isinstance(error, Terminated) else int(signal.SIGINT)
 
 
 def simulate(run, writers, *, progress: bool = False, replay=(), replay_writers=(), figures_stem: str | None = None,
@@ -50,11 +66,12 @@ def simulate(run, writers, *, progress: bool = False, replay=(), replay_writers=
     (those that do not hold them yet) and restored from the last. `progress`: a bar on the terminal.
     `on_measured(measurements)` runs inside the writers' contexts (e.g. to store them in the HDF5
     file). With `figures_stem` the run's figures of the frames kept are written as STEM_NAME.png.
-    SIGTERM stops the run as Ctrl-C does, keeping the frames so far."""
+    SIGTERM stops the run as Ctrl-C does, keeping the frames so far (`Outcome.signal` says which)."""
     outcome = Outcome()
-    if threading.current_thread() is threading.main_thread():  # (a sweep's worker runs it in a thread)
-        signal.signal(signal.SIGTERM, _terminate)
+    main = threading.current_thread() is threading.main_thread()  # (a sweep's worker runs it in a thread)
+    previous = signal.signal(signal.SIGTERM, terminate) if main else None
     bar = tqdm(total=run.frames, desc=getattr(run, "name", "run"), unit="frame", disable=not progress, leave=False)
+    unwritten = False
     try:
         with contextlib.ExitStack() as stack:
             for writer in writers:
@@ -77,19 +94,27 @@ def simulate(run, writers, *, progress: bool = False, replay=(), replay_writers=
                 except FAILURES as error:  # the frames so far are complete: keep them
                     outcome.failure = str(error)
                     break
-                _write(run, writers, run.frame())
+                try:
+                    _write(run, writers, run.frame())
+                except OSError as error:  # a full disk: the files keep the frames before it
+                    unwritten = True
+                    outcome.failure = (f"writing frame {outcome.frames} failed ({error}); free space and continue "
+                                       "with --resume")
+                    break
                 done += 1
                 outcome.frames += 1
                 bar.update(1)
                 bar.set_postfix(t=f"{run.time:.4g}")
             outcome.measurements = run.measurements()
-            if on_measured is not None:
+            if on_measured is not None and not unwritten:  # (a file short of a frame: a resume measures it)
                 on_measured(outcome.measurements)
-    except KeyboardInterrupt:
-        outcome.interrupted = True
+    except KeyboardInterrupt as error:
+        outcome.interrupted, outcome.signal = True, interrupt_signal(error)
         outcome.measurements = run.measurements()
     finally:
         bar.close()
+        if main and previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     if figures_stem is not None and outcome.frames > 1:  # the figures of the frames kept, also after a stop
         outcome.figures = run.figures(figures_stem)
     return outcome

@@ -31,6 +31,7 @@ import warp as wp
 from .device import deterministic_default, mat22, numpy_dtype, run_steps, vec3
 from .geometry import LimitMask, SurfaceTables
 from .kernels import laplace as kernels_laplace
+from .kernels import one_device_methods
 from .kernels.laplace import (
     assemble_mass_kernel,
     assemble_stiffness_kernel,
@@ -67,6 +68,8 @@ J_FLOOR = 1e-2
 DOT_STRIDE = 16384  # partial sums per dot product: few atomics, enough threads for a GPU
 
 
+@one_device_methods("apply_device", "diagonal_device", "consistent_mass_device", "inverse_mass_device",
+                    "dot_device")
 class LaplaceBeltrami:
     """-Δ_LB on the limit surface of `mesh` at control positions `x` (default: the mesh's own).
 

@@ -22,18 +22,52 @@ class ArrivalTimes:
     first local maximum of the vertex's control concentration above 1% of the initial peak; the
     larger peaks where fronts cross later do not count), interpolated between the samples taken
     at every relaxation (as the arrival checks of tests/test_waves.py). `time` is 0 where no front
-    has (clearly) arrived: no such peak before the last sample, or c was above half of it at t = 0."""
+    has (clearly) arrived: no such peak before the last sample, or c was above half of it at t = 0.
 
-    def __init__(self, c0: np.ndarray):
+    A frame carries the samples taken since the previous one (`frame_samples`, in `slots` slots),
+    so that a resumed run replays them (`replay`) and measures what the uninterrupted run measures."""
+
+    def __init__(self, c0: np.ndarray, slots: int = 1):
         self._times, self._values = [0.0], [np.asarray(c0, dtype=np.float64).copy()]
+        self.slots, self._framed = int(slots), 1  # samples a frame carries; samples up to the last frame
 
     def update(self, c: np.ndarray, time: float) -> None:
         self._times.append(float(time))
         self._values.append(np.asarray(c, dtype=np.float64).copy())
 
+    def frame_samples(self) -> dict:
+        """The samples since the last recorded frame: `relaxation_count`, `relaxation_times` (slots,) and
+        `relaxation_concentration` (slots, V), zero after the count."""
+        times, values = self._times[self._framed:], self._values[self._framed:]
+        if len(times) > self.slots:
+            raise RuntimeError(f"{len(times)} relaxations in a frame, more than the {self.slots} slots it stores")
+        padded_times, padded = np.zeros(self.slots), np.zeros((self.slots, len(self._values[0])))
+        padded_times[:len(times)] = times
+        if values:
+            padded[:len(values)] = np.array(values)
+        return {"relaxation_count": np.array(len(times)), "relaxation_times": padded_times,
+                "relaxation_concentration": padded}
+
+    def framed(self) -> None:
+        """A frame was written: later samples belong to the next."""
+        self._framed = len(self._times)
+
+    def replay(self, time: float, frame: dict) -> None:
+        """A stored frame (a resume): its samples; a file from before they were stored gives the frame's
+        concentration at its time (after t = 0)."""
+        count = float(frame.get("relaxation_count", np.nan))
+        if np.isfinite(count):
+            for t, c in zip(frame["relaxation_times"][:int(count)], frame["relaxation_concentration"][:int(count)]):
+                self.update(c, t)
+        elif time > 0:
+            self.update(frame["concentration"], time)
+        self.framed()
+
     @property
     def time(self) -> np.ndarray:
         values, times = np.array(self._values), np.array(self._times)
+        if len(times) < 2:  # no front has moved yet
+            return np.zeros(values.shape[1])
         falls = (values[:-1] >= values[1:]) & (values[:-1] > 0.01 * values[0].max())
         falls[:1] = False  # falling from t = 0 is the initial pulse, not an arrival
         columns = np.arange(values.shape[1])

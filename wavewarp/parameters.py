@@ -129,14 +129,32 @@ def scene_descriptions() -> dict[str, str]:
     return dict(sorted(found.items()))
 
 
+def _scene_script(path: str):
+    """The module of the scene script `path`; SceneError where it is missing, not Python or fails to load."""
+    if not os.path.isfile(path):
+        raise SceneError(f"scene script {path!r} does not exist")
+    if not path.endswith(".py"):
+        raise SceneError(f"scene script {path!r} is not a Python file (.py): give a scene name (wavewarp list) or a "
+                         "script that defines NAME, Parameters and build")
+    spec = importlib.util.spec_from_file_location("wavewarp_user_scene", path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as error:
+        if error.lineno is None:  # null bytes: a binary file
+            raise SceneError(f"scene script {path!r} is not a Python text file ({error.msg})") from None
+        raise SceneError(f"scene script {path!r} is not valid Python: {error.msg} (line {error.lineno})") from None
+    except ValueError as error:  # e.g. null bytes or bytes that are no UTF-8: a binary file
+        raise SceneError(f"scene script {path!r} is not a Python text file ({error})") from None
+    except Exception as error:  # the script's own failure, in one line
+        raise SceneError(f"scene script {path!r} failed to load: {type(error).__name__}: {error}") from None
+    return module
+
+
 def load_scene(name_or_path: str):
     """The scene module: a name from `wavewarp.scenes` or the path of a scene script."""
     if name_or_path.endswith(".py") or os.sep in name_or_path:
-        if not os.path.isfile(name_or_path):
-            raise SceneError(f"scene script {name_or_path!r} does not exist")
-        spec = importlib.util.spec_from_file_location("wavewarp_user_scene", name_or_path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
+        module = _scene_script(name_or_path)
     else:
         known = scene_descriptions()
         if name_or_path not in known:

@@ -28,6 +28,8 @@ from .model import ModelBuilder
 from .parameters import as_dict, param
 from .relax import NEWTON_STEPS
 from .runs import WaveClock, imperfect, mean_edge, scene_mesh, transport_parameter
+from .schema import COUNTER
+from .sizing import check_steps
 from .waves import BlowUpError, TimeStepError
 
 
@@ -101,7 +103,6 @@ class BoxParameters(TelegraphParameters):
 # ~1/6 of a CPU one against the same host factorization (docs/theory/shell.md)
 CG_BUDGET = {False: 2000, True: 20000}
 UNRESOLVED_MASS_GROWTH = 50.0  # a vertex's lumped mass over its rest value past which a blow-up is named a fold
-COUNTER = "count_"  # the prefix of the frames' bookkeeping series (relaxations, iterations, ...)
 
 
 def quasi_static_model(mesh: Mesh, ps: list, *, size: float, rule: str = "3", device=None, self_contact: bool = False):
@@ -147,6 +148,7 @@ def frame_clock(p, t_end: float, edge: float, bound: float, report=print) -> tup
     if not p.dt:  # the automatic step shrinks so that the frames asked for end on t_end
         dt = interval / steps_per_frame
     frames = max(1, round(t_end / (steps_per_frame * dt)))
+    check_steps(frames * steps_per_frame, dt, t_end)
     if frames < p.frames:
         report(f"{frames} frames, not the {p.frames} asked for: a frame ends on a relaxation, every "
                f"{relax_every} steps of dt = {dt:.4g}; with --set dt=auto every frame is written")  # fmt: skip
@@ -206,7 +208,11 @@ class QuasiStaticWaveRun(WaveClock):
         self.series.update({COUNTER + name: () for name in self._counters()})  # the bookkeeping, for a resume
         self.size = size
         self.origin = np.asarray(origin, dtype=np.float64)
-        self.arrival = ArrivalTimes(self.wave.concentration())
+        # the relaxations a frame holds: the adaptive step's coupled steps are at least 2/3 of a relaxation interval
+        relaxations = self.steps_per_frame // relax_every
+        self.arrival = ArrivalTimes(self.wave.concentration(), 2 * relaxations + 2 if self.adaptive else relaxations)
+        self.series.update(relaxation_count=(), relaxation_times=(self.arrival.slots,),
+                           relaxation_concentration=(self.arrival.slots, mesh.n_vertices))  # for a resume
         self.profiles = []  # per frame: (time, profile along the scene's chosen curve), for figures
         self.concentrations = []  # per frame: the control concentrations, for the run's colour scale (run_range)
         self.time_unit = f"nondimensional time units (wave speed γ = {p.gamma:g} length units per time unit)"
@@ -216,7 +222,7 @@ class QuasiStaticWaveRun(WaveClock):
 
     def frame(self) -> dict:
         """The current frame: control positions, concentrations and the wave's rate c_t (control values)."""
-        frame = self.coupled.state.to_frame()
+        frame = {**self.coupled.state.to_frame(), **self.arrival.frame_samples()}
         if self.adaptive:
             frame["chemistry_dt"] = np.array(self.wave.dt)
         frame.update({COUNTER + name: np.array(value) for name, value in self._counters().items()})
@@ -282,11 +288,10 @@ class QuasiStaticWaveRun(WaveClock):
         if self.adaptive:
             if float(frame["chemistry_dt"]) != self.wave.dt:
                 self._change_dt(float(frame["chemistry_dt"]), recentre=False)  # c_t already belongs to it
-            self.wave.time = float(frame["time"])
-            self.wave.steps = int(round(self.wave.time / self.base_dt))
+            self.wave.steps = int(round(float(frame["time"]) / self.base_dt))
         else:
             self.wave.steps = int(round(frame["time"] / self.wave.dt))
-            self.wave.time = self.wave.steps * self.wave.dt
+        self.wave.time = float(frame["time"])  # as the uninterrupted run summed it
         stored = {name[len(COUNTER):]: value for name, value in frame.items() if name.startswith(COUNTER)}
         if stored and np.isfinite(list(stored.values())).all():  # files from before the bookkeeping: afresh
             self.coupled.restore_counters(stored)
@@ -295,9 +300,12 @@ class QuasiStaticWaveRun(WaveClock):
                 self.shell.self_contact.searches = int(stored["self_contact_searches"])
 
     def record(self, time: float, frame: dict, stored: bool = False) -> None:
-        """Note a written frame for the figures (and, for frames read back on resume, the arrival times)."""
+        """Note a written frame for the figures (and, for frames read back on resume, the arrival times'
+        samples)."""
         if stored:
-            self.arrival.update(frame["concentration"], time)
+            self.arrival.replay(time, frame)
+        else:
+            self.arrival.framed()
         self.concentrations.append(np.array(frame["concentration"]))
         self.balance.record(time, frame["positions"], frame["concentration"], telegraph_total(*self.invariant, time))
         if self._profile is not None:

@@ -127,7 +127,7 @@ class QuasiStaticBatch(WorldsRun):
         self.coupled.state.assign_frame(joined)
         self.coupled.restore(joined["positions"])
         self.wave.steps = int(round(time / self.wave.dt))
-        self.wave.time = self.wave.steps * self.wave.dt
+        self.wave.time = float(time)  # as the uninterrupted run summed it
         for w, frame in enumerate(frames):
             self.coupled.restore_counters({name: frame[COUNTER + name] for name in self.coupled.TALLIES}, w)
 

@@ -22,7 +22,7 @@ import warp as wp
 from .checks import finite, plain, positive
 from .device import deterministic_default, mat22, numpy_dtype, reduction_threads, world_sums
 from .geometry import SurfaceTables, checked_positions, evaluate
-from .kernels import register_capped
+from .kernels import one_device_methods, register_capped
 from .kernels.adjoint import eval_shell_rates
 from .kernels.adjoint_rest import eval_rest_forms_rate, eval_volume_target_rate
 from .kernels.reduce import REDUCTION_BLOCK
@@ -119,6 +119,7 @@ def resolved_regular_patches(regular_patches: str, cuda_arch: int | None, scalar
     return "held" if regular_patches == "vector" and scalar != wp.float32 else regular_patches
 
 
+@one_device_methods("energy_device", "forces_device", "volume_gradient_device")
 class Shell:
     """Active Koiter shell on the Loop limit surface of `mesh` (its vertices are the rest state).
 

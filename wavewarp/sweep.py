@@ -7,7 +7,10 @@ cluster with one worker per GPU, or per CPU core.
 
 Every point's result is written atomically to DIR/points/POINT.json as soon as it is computed,
 so a killed sweep loses only the points being computed; running the same sweep into the same
-DIR again computes only the points without a result. With `h5` each point's trajectory
+DIR again computes only the points without a result, and those whose result is a failure. A point
+is locked while it is computed (DIR/points/.POINT.json.lock): two sweeps into one DIR compute each
+point once. A batch whose worker died (Dask retries it on another first) or whose task raised
+fails its points alone: the sweep goes on, and reports them. With `h5` each point's trajectory
 (DIR/points/POINT.h5) is durable frame by frame and records the batch it ran in: the batches a
 killed sweep left part-way are run again as they were and go on from their worlds' last common
 frame. At the end the sweep writes DIR/table.csv (a row per point) and DIR/chart.png (a
@@ -32,6 +35,7 @@ import re
 import shutil
 import tempfile
 import time
+import uuid
 from dataclasses import dataclass, field, replace
 
 import h5py
@@ -45,8 +49,10 @@ from .device import init_warp, set_deterministic
 from .driver import FAILURES, simulate
 from .figures import sweep_chart_png
 from .io import atomic_path, write_json
+from .locks import OutputBusy, output_lock
 from .parameters import SceneError, fields, load_scene, resolve
 from .trajectory import TrajectoryWriter, complete_frames, read_frames
+from .version import __version__
 
 BATCH_ATTRIBUTE = "sweep_batch"  # a point's trajectory: the names of the points of the batch it ran in (JSON)
 
@@ -58,7 +64,8 @@ class SweepSpec:
     seeds to an ensemble), `fixed` NAME=VALUE settings for every point, `quick` (the
     scene's reduced run), `device` ("cpu", "cuda" or None: the worker's choice), `h5` (a trajectory
     per point), `measure`, the measurement the chart shows (None: the first that differs between
-    points), and `deterministic` (bit-exact repeated runs on a GPU: wavewarp.device.set_deterministic)."""
+    points), `deterministic` (bit-exact repeated runs on a GPU: wavewarp.device.set_deterministic), and
+    `invocation`, the id `sweep` gives one sweep's run (each result it writes records it)."""
 
     scene: str
     grid: dict = field(default_factory=dict)
@@ -70,6 +77,7 @@ class SweepSpec:
     h5: bool = False
     measure: str | None = None
     deterministic: bool = False
+    invocation: str = ""
 
     def definition(self) -> dict:
         """What identifies the sweep's points and results (not where they run); first_seed only where it
@@ -150,9 +158,11 @@ def trajectory_path(out: str, point: Point) -> str:
 
 def stored_batch(path: str) -> tuple:
     """The batch a point's trajectory ran in (its points' names) and the frames it holds; ([], 0) where
-    there is no trajectory to continue."""
+    there is no trajectory to continue (also one another wavewarp version wrote: a resume would refuse it)."""
     try:
         with h5py.File(path, "r") as f:
+            if f.attrs.get("wavewarp_version") != __version__:
+                return [], 0
             return json.loads(f.attrs.get(BATCH_ATTRIBUTE, "[]")), complete_frames(f)
     except (OSError, KeyError, ValueError):
         return [], 0
@@ -185,7 +195,8 @@ def point_writer(out: str, points, w: int, *, mesh, series, scene: str, paramete
     return TrajectoryWriter(trajectory_path(out, points[w]), triangles=mesh.triangles, rest_positions=mesh.vertices,
                             series=series, scene=scene, parameters=parameters, device=device,
                             resume=resume_frames > 0, resume_frames=resume_frames or None,
-                            attributes={BATCH_ATTRIBUTE: json.dumps([point.name for point in points])})  # fmt: skip
+                            attributes={BATCH_ATTRIBUTE: json.dumps([point.name for point in points])},
+                            provenance={"seed": points[w].seed})  # fmt: skip
 
 
 def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
@@ -194,7 +205,8 @@ def run_point(spec: SweepSpec, point: Point, out: str) -> dict:
     building the run is a result too ("failed", with the message)."""
     module = load_scene(spec.scene)
     p = point_parameters(module, spec, point)
-    result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition()}
+    result = {"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
+              "invocation": spec.invocation}
     reports, start = [], time.perf_counter()
     try:
         run = module.build(p, device=spec.device, seed=point.seed, report=reports.append)
@@ -226,7 +238,8 @@ def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     with `batch` {worlds, world}. A batch whose trajectories hold its frames so far (a killed sweep's)
     goes on from the last frame they share (`batch` then also says after how many frames)."""
     results = [{"point": point.name, "values": dict(point.values), "seed": point.seed, "sweep": spec.definition(),
-                "batch": {"worlds": len(points), "world": w}} for w, point in enumerate(points)]  # fmt: skip
+                "invocation": spec.invocation, "batch": {"worlds": len(points), "world": w}}
+               for w, point in enumerate(points)]
     reports, start = [], time.perf_counter()
     try:
         run = module.build_batch([point_parameters(module, spec, point) for point in points],
@@ -251,15 +264,40 @@ def run_worlds(spec: SweepSpec, module, points, out: str) -> list:
     return results
 
 
+def has_result(out: str, point: Point) -> bool:
+    """Whether `point` has a result that is no failure (a failed point is run again)."""
+    result = stored_result(out, point)
+    return result is not None and result.get("status") != "failed"
+
+
+def skipped(point: Point, reason: str) -> dict:
+    """What a batch reports of a point it left to another sweep (nothing is written)."""
+    return {"point": point.name, "values": dict(point.values), "seed": point.seed, "status": "skipped",
+            "reason": reason}
+
+
 def run_batch(spec: SweepSpec, points, out: str) -> list:
     """The points of one batch in this worker (each result written as it comes): one batched run where
-    the scene has batched worlds, else one point after another."""
+    the scene has batched worlds, else one point after another. Each point is locked while it runs; a
+    point another sweep holds, or has computed meanwhile, is skipped (reported, "skipped")."""
     wp.config.log_level = wp.LOG_WARNING
     set_deterministic(spec.deterministic)
     module = load_scene(spec.scene)
-    if len(points) > 1 and hasattr(module, "build_batch"):
-        return run_worlds(spec, module, points, out)
-    return [run_point(spec, point, out) for point in points]
+    with contextlib.ExitStack() as stack:
+        mine, left = [], []
+        for point in points:
+            try:
+                stack.enter_context(output_lock(result_path(out, point), "point"))
+            except OutputBusy:
+                left.append(skipped(point, "another sweep into this folder is computing it"))
+                continue
+            if has_result(out, point):
+                left.append(skipped(point, "another sweep into this folder computed it"))
+            else:
+                mine.append(point)
+        if len(mine) > 1 and hasattr(module, "build_batch"):
+            return run_worlds(spec, module, mine, out) + left
+        return [run_point(spec, point, out) for point in mine] + left
 
 
 def world_group(spec: SweepSpec):
@@ -408,16 +446,34 @@ def write_table(rows, path) -> None:
         writer.writerows(rows)
 
 
+class SweepTable(list):
+    """The table's rows (one dict per point with a result), and what this sweep did: `computed` (points it
+    ran to a result, "done" or "stopped"), `skipped` (points with a result before it, or left to another
+    sweep into the folder) and `failures` (point -> error: points that failed; a re-run tries them again)."""
+
+    def __init__(self, rows, computed: int = 0, skipped: int = 0, failures: dict | None = None):
+        super().__init__(rows)
+        self.computed, self.skipped, self.failures = computed, skipped, dict(failures or {})
+
+    def summary(self) -> dict:
+        """{"computed", "skipped", "failed"} (counts) and the `failures` by point."""
+        return {"computed": self.computed, "skipped": self.skipped, "failed": len(self.failures),
+                "failures": self.failures}
+
+
 def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | None = None, batch: int = 1,
-          workers: int | None = None, scheduler: str | None = None, progress: bool = False, report=print) -> list:  # fmt: skip
-    """Run every point of `spec` without a result in `out` (batches of `batch` points on `executor`;
-    None: a Dask client of `scheduler`, or of a local cluster), then write DIR/table.csv and
-    DIR/chart.png. Returns the rows of the table (one dict per point)."""
+          workers: int | None = None, scheduler: str | None = None, progress: bool = False,
+          report=print) -> SweepTable:
+    """Run every point of `spec` without a result in `out`, or whose result is a failure (batches of `batch`
+    points on `executor`; None: a Dask client of `scheduler`, or of a local cluster), then write
+    DIR/table.csv and DIR/chart.png. A batch whose worker died or whose task raised fails its points (their
+    results say why) and the others go on. Returns the table's rows with what this sweep did (SweepTable)."""
+    spec = replace(spec, invocation=uuid.uuid4().hex)
     points = grid_points(spec)
     check_points(spec, points)
     group = world_group(spec)
     prepare_folder(spec, out)
-    missing = [p for p in points if not os.path.isfile(result_path(out, p))]
+    missing = [p for p in points if not has_result(out, p)]
     report(f"{len(points) - len(missing)} of {len(points)} points already done; running {len(missing)}")
     if missing:
         with _executor(executor, spec, workers, scheduler, report) as pool:
@@ -426,26 +482,44 @@ def sweep(spec: SweepSpec, out: str, *, executor: concurrent.futures.Executor | 
                 report(f"{len(started)} batch(es) of a killed sweep go on from their trajectories' frames")
             planned = started + batches(fresh, batch, group)
             work = {pool.submit(run_batch, spec, points, out): points for points in planned}
-            bar, died = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress), []
+            bar = tqdm(total=len(missing), unit="point", desc=spec.scene, disable=not progress)
             for future in concurrent.futures.as_completed(work):
                 try:
-                    bar.update(len(future.result()))
-                except KilledWorker as error:
-                    died.append((work[future], error))
+                    future.result()
+                except Exception as error:  # the batch's worker died (Dask's KilledWorker) or its task raised
+                    lost_batch(spec, work[future], out, error)
+                bar.update(len(work[future]))
             bar.close()
-            if died:
-                raise workers_died(died, out) from died[0][1]
     rows = table_rows(out, points)
     write_table(rows, os.path.join(out, "table.csv"))
     sweep_chart_png(rows, list(spec.grid), spec.measure, os.path.join(out, "chart.png"), title=spec.scene)
-    return rows
+    stored = [stored_result(out, point) for point in points]  # what this sweep wrote (a batch Dask ran twice, once)
+    ours = [result for result in stored if result is not None and result.get("invocation") == spec.invocation]
+    failures = {result["point"]: result.get("error", "") for result in ours if result["status"] == "failed"}
+    computed = len(ours) - len(failures)
+    return SweepTable(rows, computed=computed, skipped=len(points) - len(ours), failures=failures)
 
 
-def workers_died(died: list, out: str) -> RuntimeError:
-    """The sweep's error for the batches (their points, Dask's error) whose worker process died."""
-    names = "; ".join(f"{points[0].name} … {points[-1].name}" for points, _ in died)
-    return RuntimeError(
-        f"{len(died)} batch(es) ({names}) lost their worker every time they were tried: its process was stopped by "
-        "Dask's memory monitor (at 95% of the worker's memory limit) or crashed in native code. Every other point is "
-        f"kept in {os.path.join(out, 'points')}: run the same sweep again to compute only the rest, with a smaller "
-        "--batch (fewer worlds per run) or fewer workers per machine")
+def stored_result(out: str, point: Point) -> dict | None:
+    """The point's result in `out`, None where it has none (or an unreadable one)."""
+    try:
+        with open(result_path(out, point)) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def lost_batch(spec: SweepSpec, points, out: str, error: Exception) -> None:
+    """A batch whose task ended in `error`: each of its points without a result gets a failure that says why
+    (a re-run tries it again); those it finished before keep theirs."""
+    if isinstance(error, KilledWorker):
+        why = ("its worker process died every time the batch was tried: stopped by Dask's memory monitor (at 95% "
+               "of the worker's memory limit) or crashed in native code; run the sweep again, with a smaller --batch "
+               "(fewer worlds per run) or fewer workers per machine")
+    else:
+        why = f"its batch raised {type(error).__name__}: {' '.join(str(error).split())}"
+    for point in points:
+        if not has_result(out, point):
+            write_json(result_path(out, point), {"point": point.name, "values": dict(point.values), "seed": point.seed,
+                                                 "sweep": spec.definition(), "invocation": spec.invocation,
+                                                 "status": "failed", "error": why, "wall_time_s": 0.0})

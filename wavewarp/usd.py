@@ -30,6 +30,7 @@ from .checks import count
 from .colours import COLOUR_MAP, PERCENTILES, colour_map, run_range
 from .io import atomic_path
 from .refinement import BakedSurface
+from .sizing import check_bake_size
 
 SURFACES = ("loop", "baked")
 TIME_UNIT = "the scene's time unit (docs/theory/scenes.md)"
@@ -57,11 +58,18 @@ class UsdAnimation:
         self.field_name = field_name
         self.field_range = None if field_range is None else tuple(float(v) for v in field_range)
         self.ground_size = float(ground_size)
+        if surface == "baked":
+            check_bake_size(len(triangles), levels)  # before the refined surface is built
         self.baked = BakedSurface(triangles, levels) if surface == "baked" else None
         self.triangles = np.asarray(triangles if self.baked is None else self.baked.triangles, dtype=np.int32)
         self.frames = 0
         self.times: list[float] = []
         self.fields: list[np.ndarray] = []  # each frame's field as the file holds it (float32), coloured at close
+
+    @property
+    def points_per_frame(self) -> int:
+        """Points authored per frame: the control vertices, or the baked surface's."""
+        return int(self.triangles.max()) + 1
 
     @property
     def surface_label(self) -> str:

@@ -29,6 +29,7 @@ from .mesh import Mesh, icosphere
 from .model import ModelBuilder
 from .parameters import SceneError, as_dict, param
 from .runs import WaveClock, imperfect, mean_edge, scene_mesh, transport_parameter
+from .sizing import check_steps
 
 AUTO_DT_SAFETY = 0.4  # dt=auto: this fraction of the chemistry's stability bound on the settled shell
 TRACE_COLUMNS = 8  # t, c at the origin vertex, centre of mass (3), the origin vertex's position (3)
@@ -231,6 +232,13 @@ def bound_over_reference_range(dynamics) -> float:
     return max(omegas)
 
 
+def check_walker_steps(p) -> None:
+    """Refuse, before anything is built, an explicit dt that makes the walk to its end absurdly long."""
+    if p.dt:
+        t_end = p.periods * fhn_kinetic_period(p.nu, p.kappa, p.epsilon)
+        check_steps(t_end / p.dt, p.dt, t_end)
+
+
 class WalkerRun(WaveClock):
     """An FHN wave on an inertial active shell on the ground: the sphere, prism, cube and bilayer walkers.
 
@@ -246,6 +254,7 @@ class WalkerRun(WaveClock):
 
     def __init__(self, name: str, mesh: Mesh, p, *, radius: float, size: float, origin, bilayer: bool = False,
                  rule: str = "3", device=None, mechanics_dt=None, report=print):  # fmt: skip
+        check_walker_steps(p)
         placed = place_walker(mesh, p, origin)
         mesh, per, depth = placed.mesh, placed.per, placed.depth
         self.name, self.mesh, self.p, self.radius = name, mesh, p, radius
@@ -357,7 +366,7 @@ def restore_walk(run, frame: dict, sensitive: bool) -> None:
     run.wave.set_produced(float(frame["reaction_amount"]),
                           per_vertex if per_vertex is not None and np.isfinite(per_vertex).all() else None)
     run.wave.steps = int(round(frame["time"] / run.wave.dt))
-    run.wave.time = run.wave.steps * run.wave.dt
+    run.wave.time = float(frame["time"])  # as the uninterrupted run summed it
     run.arrival.restore(frame["first_arrival"], run.wave.steps, run.wave.dt)
     run.shell.update_reference(run.wave.c)
     if sensitive:
