@@ -105,8 +105,9 @@ def test_the_overdamped_coupling_relaxes_by_cg_and_refuses_the_newton_finish():
         return QuasiStatic(shell, wave, drag=0.01, method=method)
 
     coupled("auto").step()
+    run = coupled("newton")  # the equilibrium at t = 0 is quasi-static, Newton's to take
     with pytest.raises(ValueError, match="method 'ncg' or 'auto'"):
-        coupled("newton")
+        run.step()
 
 
 def test_drag_refuses_what_is_not_a_drag():

@@ -104,13 +104,13 @@ class QuasiStatic:
         self._frozen = {}  # world -> its state arrays' share at the start of the step it failed in
         self._step_start = None  # batched worlds: the state at the start of the current step
         self.rest_mass = self.operator.mass()  # the fold's reference (the operator is on the rest surface here)
-        self.drag = None
-        if np.any(drag):  # one ζ, or one per batched world
-            self.drag = Drag(shell, drag=drag)
-            shell.terms = (*shell.terms, self.drag)
         x0 = shell.mesh.vertices if x0 is None else np.asarray(x0, dtype=np.float64)
         wave.state.x = wp.array(x0.astype(shell._real), dtype=shell.vec3, device=shell.device)
-        self._equilibrate(initial=True, start=self._start_of_step())
+        self.drag = None
+        self._equilibrate(initial=True, start=self._start_of_step())  # quasi-static (with its Newton finish)
+        if np.any(drag):  # one ζ, or one per batched world: the steps after it are overdamped
+            self.drag = Drag(shell, drag=drag)
+            shell.terms = (*shell.terms, self.drag)
 
     state = property(lambda self: self.wave.state)
     time = property(lambda self: self.wave.time)
@@ -137,7 +137,7 @@ class QuasiStatic:
     def _equilibrate(self, initial: bool = False, start=None) -> None:
         x, shell = self.state.x, self.shell
         shell.update_reference(self.state.c)
-        if self.drag is not None and not initial:
+        if self.drag is not None:
             self.drag.set_interval(self.chemistry_steps * self.wave.dt)
         for term in shell.terms:  # a load step starts where the last equilibrium left the shell (RestingGround)
             term.begin_step(x)
