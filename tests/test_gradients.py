@@ -102,8 +102,9 @@ def test_the_rest_shapes_gradient_matches_central_differences_of_whole_runs():
                 heights.append(height_of(other))
             expected[axis] = (heights[0] - heights[1]) / (2 * delta)
         assert np.linalg.norm(expected) > 1e-4  # a gradient that matters (J = 19, L = 27)
-        # measured: 4e-7 to 7e-7 of each large component, 1e-6 of the point's norm at most
-        assert np.abs(result["shape_gradient"][k] - expected).max() < 1e-5 * np.linalg.norm(expected)
+        # measured: 4e-7 to 7e-7 of each large component, 1e-6 of the point's norm at most on the 2-core CI CPU; 1.1e-5
+        # on an H200 host's CPU (another NumPy and BLAS: the equilibria agree to the relaxation's tolerance only)
+        assert np.abs(result["shape_gradient"][k] - expected).max() < 3e-5 * np.linalg.norm(expected)
 
 
 def test_a_float32_runs_gradient_is_the_float64_runs_to_1e_3():

@@ -51,13 +51,13 @@ def waiting_runs(tmp_path):
 
 def start_waiting_run(folder, name: str) -> subprocess.Popen:
     """`wavewarp run` of the waiting scene into FOLDER/NAME.usda and FOLDER/NAME.h5 in its own process, returned
-    once its first frame is in the HDF5 file (the file takes its name with that frame)."""
+    once its first frame is written (the scene says so: FOLDER/ready.PID)."""
     out, h5 = folder / f"{name}.usda", folder / f"{name}.h5"
     process = subprocess.Popen([sys.executable, "-m", "wavewarp.cli", "run", waiting_scene(folder), *QUICK, "--out",
                                 str(out), "--h5", str(h5)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                preexec_fn=interruptible)
     start = time.monotonic()
-    while not h5.exists():
+    while not (folder / f"ready.{process.pid}").exists():
         assert process.poll() is None, process.communicate()
         assert time.monotonic() - start < HANG_GUARD_S, "the waiting run wrote no frame"
         time.sleep(0.05)

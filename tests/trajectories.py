@@ -58,8 +58,9 @@ def assert_same_trajectory(expected, actual, unlike=("resumed_by",)) -> None:
 
 
 def waiting_scene(folder) -> str:
-    """A scene script: cube-waves whose process, after writing its first frame, waits until the file
-    FOLDER/go exists (a long run, held where a test wants it; after 600 s it gives up, a guard against hanging)."""
+    """A scene script: cube-waves whose process, after writing its first frame, creates FOLDER/ready.PID and waits
+    until the file FOLDER/go exists (a long run, held where a test wants it; after 600 s it gives up, a guard against
+    hanging)."""
     path = folder / "waiting_cube_waves.py"
     path.write_text(textwrap.dedent(f"""
         import os, time
@@ -71,6 +72,7 @@ def waiting_scene(folder) -> str:
             advance = run.advance_frame
 
             def advance_when_told():
+                open(os.path.join({str(folder)!r}, f"ready.{{os.getpid()}}"), "w").close()
                 start = time.monotonic()
                 while not os.path.exists({str(folder / "go")!r}):
                     if time.monotonic() - start > 600:
