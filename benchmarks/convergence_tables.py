@@ -93,19 +93,21 @@ HEADLINE = {
 
 def converged_value(members: dict, name: str) -> dict | None:
     """The converged estimate of one observable from one reading's points {(level, k): measurements}: Richardson
-    over the levels at the step k_ref with the most levels, corrected for that step's error by Richardson over
-    the steps at the finest level that ran k_ref. Errors add."""
+    over the levels at the step k_ref with the most levels (of those, the largest dt), corrected for that step's
+    error by Richardson over the steps at the finest level from k_ref on. Errors add. None with fewer than two
+    levels."""
 
     def value(level, k):
         v = members.get((level, k), {}).get(name)
         return None if v is None else float(v)
 
     steps = {k for _, k in members}
-    k_ref = max(steps, key=lambda k: (sum(value(lv, k) is not None for lv, kk in members if kk == k), k), default=None)
+    # the step with the most levels, the smallest of them: the time sequence from it at the finest level is longest
+    k_ref = max(steps, key=lambda k: (sum(value(lv, k) is not None for lv, kk in members if kk == k), -k), default=None)
     if k_ref is None:
         return None
     levels = sorted(lv for lv, k in members if k == k_ref and value(lv, k) is not None)
-    if not levels:
+    if len(levels) < 2:  # one mesh: no mesh error to state
         return None
     mesh = richardson([value(lv, k_ref) for lv in levels])
     finest = levels[-1]

@@ -70,8 +70,9 @@ def sample(run, device, steps: int, wall: float) -> dict:
             "volume": float(run.shell.volume(run.dynamics.positions())), "wall_time_s": wall, **memory(device)}
 
 
-def soak(p, device, steps: int, every: int, report=print) -> dict:
-    """Run the walker `steps` chemistry steps (whole frames), sampling about every `every` steps."""
+def soak(p, device, steps: int, every: int, report=print, on_sample=None) -> dict:
+    """Run the walker `steps` chemistry steps (whole frames), sampling about every `every` steps; `on_sample(samples)`
+    after each sample (a run cut short keeps what it measured)."""
     module = load_scene(SCENE)
     run = module.build(p, device=device.alias, report=report)
     frames = max(1, math.ceil(steps / run.steps_per_frame))
@@ -83,6 +84,8 @@ def soak(p, device, steps: int, every: int, report=print) -> dict:
         if frame % per_sample == 0 or frame == frames:
             wp.synchronize_device(device)
             samples.append(sample(run, device, done, time.perf_counter() - start))
+            if on_sample is not None:
+                on_sample(samples)
     return {"steps": done, "steps_per_frame": run.steps_per_frame, "frames": frames, "vertices": run.mesh.n_vertices,
             "samples": samples}
 
@@ -138,11 +141,16 @@ def main(argv=None) -> int:
     module = load_scene(SCENE)
     p = resolve(module.Parameters, module.QUICK if args.quick else None, args.set)
     p = replace(p, frames=max(p.frames, FRAMES))
-    result = soak(p, device, args.steps, args.every or max(1, args.steps // 100), report=lambda message: None)
-    result.update(scene=SCENE, parameters=vars(p), machine=describe_device(device), date=date.today().isoformat(),
-                  summary=summary(result["samples"]))
     os.makedirs(args.out, exist_ok=True)
     stem = os.path.join(args.out, f"soak_{device_tag(device)}" + ("_quick" if args.quick else ""))
+    about = dict(scene=SCENE, parameters=vars(p), machine=describe_device(device), date=date.today().isoformat())
+
+    def so_far(samples):  # the samples so far, marked unfinished
+        write_json(stem + ".json", {**about, "finished": False, "samples": samples, "summary": summary(samples)})
+
+    result = soak(p, device, args.steps, args.every or max(1, args.steps // 100), report=lambda message: None,
+                  on_sample=so_far)
+    result.update(about, finished=True, summary=summary(result["samples"]))
     write_json(stem + ".json", result)
     chart(result, stem + ".png")
     print(f"wrote {stem}.json, {stem}.png: {result['steps']} steps; " +

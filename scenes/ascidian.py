@@ -25,7 +25,6 @@ class Parameters(SphereParameters):
     )
     coupling: str = param("overdamped", "overdamped or quasi-static (docs/studies/2026-12-02-readings-of-the-model.md)",
                           choices=COUPLINGS, legacy="quasi-static")
-    tau_m: float = param(0.3, "the overdamped shell's relaxation time τ_m = ζ R²/(Y h)", positive=True)
 
 
 QUICK = {"level": 3, "frames": 4, "t_end": 4.0}  # --quick: a smoke test at level 3

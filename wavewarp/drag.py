@@ -32,6 +32,7 @@ class Drag:
     anchor is at the rest shape."""
 
     modules = (kernels_drag, kernels_limit_surface, kernels_self_contact)
+    rigid_invariant = False  # it holds rigid motions: the Newton finish must not project them out (wavewarp/newton.py)
 
     def __init__(self, shell, *, drag):  # one ζ, or one per batched world
         if shell.gradient == "autodiff":
@@ -69,3 +70,15 @@ class Drag:
         eval_drag(self.points, self.anchors, self.area, self.coefficient, with_energy, self.pressures, density)
         if forces is not None:
             spread_quadrature_forces(shell.tables, self.pressures, self.area, forces, shell.deterministic)
+
+    def twin(self, shell) -> Drag:
+        """The same drag on `shell` (the float64 twin of a float32 shell's Newton finish); `share` gives it the step."""
+        twin = Drag(shell, drag=self.drag)
+        self.share(twin)
+        return twin
+
+    def share(self, twin: Drag) -> None:
+        """Give `twin` this step's coefficients and anchors (in its dtype)."""
+        twin.interval = self.interval
+        twin.coefficient.assign(self.coefficient.numpy().astype(twin.shell._real))
+        twin.anchors.assign(self.anchors.numpy().astype(twin.shell._real))

@@ -108,14 +108,22 @@ class NewtonFinish:
             self.energy = wp.zeros(1, dtype=wp.float64)
         # the last factorization and LM shift, kept across steps and relaxations (a preconditioner)
         self.inverse, self.shift = None, None
+        self._twinned = ()  # the shell's terms the twin's were made from
         self.factorizations = self.krylov_steps = 0
 
     def share_reference(self) -> None:
-        """Give the float64 twin (if any) the shell's active reference concentrations and V̄."""
+        """Give the float64 twin (if any) the shell's active reference concentrations, V̄ and terms (each term's
+        own `twin`, given the step's state by its `share`)."""
         if self.work is not self.shell:
             c = self.shell.reference_c.numpy().astype(np.float64)
             self.work.update_reference(wp.array(c, dtype=wp.float64, device=self.work.device))
             self.work.rest_volume = self.shell.rest_volume
+            terms = self.shell.terms
+            if self._twinned != terms:
+                self.work.terms = tuple(term.twin(self.work) for term in terms)
+                self._twinned = terms
+            for term, twin in zip(terms, self.work.terms):
+                term.share(twin)
 
     def evaluate(self, x: np.ndarray) -> tuple[float, np.ndarray]:
         """(E, F) at positions x (float64 NumPy)."""
@@ -175,10 +183,14 @@ class NewtonFinish:
         for step in range(max_steps):
             if residual <= tol:
                 return x, "converged", residual, energies
-            hessian, rigid, f = None, rigid_modes(x), forces.ravel()
+            hessian, f = None, forces.ravel()
+            # a term that holds rigid motions (a drag): no projection, and a factorization every step (the last one
+            # preconditions Krylov steps only in the complement of the rigid motions)
+            free = all(getattr(term, "rigid_invariant", True) for term in work.terms)
+            rigid = rigid_modes(x) if free else None
             indefinite = False  # H(x) + shift I had a negative eigenvalue at this step's first shifts
             for _ in range(MAX_SHIFT_TRIES):
-                d = None if self.inverse is None or indefinite else self._krylov_step(x, f, rigid)
+                d = None if self.inverse is None or indefinite or not free else self._krylov_step(x, f, rigid)
                 if d is None:  # no factorization yet, or it no longer preconditions: factor H(x) + shift I
                     hessian = self.hessian(x) if hessian is None else hessian
                     self.factorizations += 1
@@ -268,10 +280,11 @@ class ShiftedInverse:
     def constrain(self, rows: np.ndarray) -> None:
         """Solve from now on for d with rows d = 0 (rows orthonormal, (k, n)): the minimum of the
         quadratic model in their complement, d = A⁻¹ (f − rowsᵀ λ), A = H + W C Wᵀ + shift I (a KKT
-        system)."""
+        system). None: no constraint (a term such as a drag holds the rigid motions itself)."""
         self.rows = rows
-        self.solved_rows = self._solve(rows.T)
-        self.schur = rows @ self.solved_rows
+        if rows is not None:
+            self.solved_rows = self._solve(rows.T)
+            self.schur = rows @ self.solved_rows
 
     def _solve(self, f: np.ndarray) -> np.ndarray:
         y = self.lu.solve(f)

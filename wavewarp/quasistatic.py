@@ -56,8 +56,7 @@ class TelegraphParameters:
     relax_every: int = param(0, "chemistry steps per relaxation; auto (0) = as many as keep the wave within half a control "
                              "edge between relaxations", minimum=0, auto=True)  # fmt: skip
     relax_tol: float = param(0.0, "relaxation tolerance, a residual strain; auto (0) = the dtype's default", minimum=0.0, auto=True)
-    relax_iterations: int = param(0, "CG iterations per relaxation before the Newton finish; auto (0) = 2,000 on a CPU "
-                                  "(overdamped: 20,000, CG alone), "
+    relax_iterations: int = param(0, "CG iterations per relaxation before the Newton finish; auto (0) = 2,000 on a CPU, "
                                   "20,000 on a GPU", minimum=0, auto=True)  # fmt: skip
     newton_steps: int = param(NEWTON_STEPS, "Newton steps a relaxation's finish may take", minimum=1)
     relax_method: str = param("auto", "auto: CG, then Newton where CG spends its budget; ncg: CG only; newton: "
@@ -165,8 +164,7 @@ def quasi_static_coupling(shell, wave, ps: list, relax_every: int, size: float) 
     """The scenes' QuasiStatic coupling from the parameters `ps` (one set, or one per batched world; relax_iterations
     auto: CG_BUDGET); overdamped: each world's ζ."""
     p = ps[0]
-    # the overdamped steps have no Newton finish (wavewarp/drag.py): CG alone, with the GPU's budget everywhere
-    budget = p.relax_iterations or CG_BUDGET[shell.device.is_cuda or p.coupling == "overdamped"]
+    budget = p.relax_iterations or CG_BUDGET[shell.device.is_cuda]
     drag = [drag_coefficient(q, size) for q in ps] if p.coupling == "overdamped" else 0.0
     return QuasiStatic(shell, wave, sensitive=p.sensitive, chemistry_steps=relax_every, tol=p.relax_tol or None,
                        max_iterations=budget, accept_unconverged=p.accept_unconverged, method=p.relax_method,

@@ -254,12 +254,15 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
     writes them to the device array `out` and returns None.
 
     "auto" hands over to Newton where CG spent its budget or stopped at round-off more than
-    ROUND_OFF_SLACK × tol away (nearer is the dtype's floor: it raises), not with self-contact or `terms`.
+    ROUND_OFF_SLACK × tol away (nearer is the dtype's floor: it raises), not with self-contact or with `terms`
+    that have no `twin` for the float64 Newton shell (RestingGround).
     """
     checked_method(method)
-    if method == "newton" and shell.terms:
-        raise ValueError("the Newton finish works on the shell's own energy: relax a shell with `terms` "
-                         "(such as RestingGround) by method 'ncg' or 'auto' (which then stays with CG)")  # fmt: skip
+    newton_terms = all(callable(getattr(term, "twin", None)) for term in shell.terms)
+    if method == "newton" and not newton_terms:
+        raise ValueError("the Newton finish works on the shell's own energy and terms that can be twinned: relax a "
+                         "shell with `terms` such as RestingGround by method 'ncg' or 'auto' (which then stays with "
+                         "CG)")
     if shell.worlds > 1:  # nonlinear CG per world; the Newton finish works on one world's Hessian
         if method == "newton" or callback is not None:
             raise ValueError(f"batched worlds relax by nonlinear CG without a callback (method 'ncg' or 'auto'), got "
@@ -272,7 +275,9 @@ def relax(shell, x: wp.array, tol: float, max_iterations: int, callback=None, ou
         return _conjugate_gradients(shell, x, tol, max_iterations, callback, out)
     except RelaxationError as error:
         floor = error.round_off and error.residual <= ROUND_OFF_SLACK * tol
-        if method == "ncg" or floor or shell.self_contact is not None or shell.terms or not np.isfinite(error.residual):
+        if method == "ncg" or floor or shell.self_contact is not None or not newton_terms:
+            raise
+        if not np.isfinite(error.residual):  # no Newton step starts from NaN positions
             raise
         history = list(shell.relax_history)
         return _newton(shell, error.x, tol, newton_steps, callback, out, history[:-1], error.iterations)
