@@ -46,7 +46,6 @@ OOCYTE_OBSERVABLES = (
     "equilibrium_lag",
 )
 BUCKLING_OBSERVABLES = ("n_onset", "n_mode", "n_max", "amplitude_max_h", "t_n_max")
-LAG_FRACTIONS = (0.25, 0.5, 0.75)
 
 
 def point_name(point: dict) -> str:
@@ -67,7 +66,6 @@ def base_step(scene: str, sets: list, device: str) -> float:
 
 def run_point(point: dict) -> dict:
     """One run; its measurements, per-frame series and (overdamped) its lag behind equilibrium."""
-    import numpy as np
     import warp as wp
 
     from wavewarp.driver import simulate
@@ -100,8 +98,8 @@ def run_point(point: dict) -> dict:
         "measurements": _plain(outcome.measurements),
         "series": _series(run),
     }
-    if coupling == "overdamped" and "equilibrium_lag" in OOCYTE_OBSERVABLES and point["scene"] != "buckling":
-        result["measurements"]["equilibrium_lag"] = _lag(run, frames, np)
+    if coupling == "overdamped" and point["scene"] != "buckling":
+        result["measurements"]["equilibrium_lag"] = _lag(run, frames)
     return result
 
 
@@ -127,8 +125,12 @@ class _Frames:
             raise KeyboardInterrupt
 
 
-def _lag(run, frames: _Frames, np) -> float | None:
-    """The largest relative lag behind the quasi-static equilibrium over the frames nearest LAG_FRACTIONS."""
+def _lag(run, frames: _Frames) -> float | None:
+    """The largest relative lag behind the quasi-static equilibrium over the frames nearest PROFILE_FRACTIONS (those
+    whose profiles the run reports)."""
+    import numpy as np
+
+    from wavewarp.measurements import PROFILE_FRACTIONS
     from wavewarp.relax import RelaxationError
 
     if len(frames.times) < 2:
@@ -137,7 +139,7 @@ def _lag(run, frames: _Frames, np) -> float | None:
     shell.terms = ()  # the equilibrium of the frame's own concentrations, without the step's drag
     times = np.array(frames.times)
     lags = []
-    for fraction in LAG_FRACTIONS:
+    for fraction in PROFILE_FRACTIONS:
         j = int(np.argmin(np.abs(times - fraction * times[-1])))
         x, c = frames.x[j].astype(np.float64), frames.c[j].astype(np.float64)
         try:

@@ -117,7 +117,7 @@ def test_the_newton_finish_with_a_drag_converges_off_the_sphere(device):
     drag = Drag(shell, drag=0.3 * 0.5 / 100)
     drag.set_interval(0.2)
     shell.terms = (drag,)
-    c = np.exp(-np.linalg.norm(mesh.vertices - [0.0, 0.0, 10.0], axis=1) ** 2 / 4)
+    c = np.exp(-(np.linalg.norm(mesh.vertices - [0.0, 0.0, 10.0], axis=1) ** 2) / 4)
     drag.begin_step(shell_positions(shell, mesh.vertices))
     energies = []
     shell.relax(mesh.vertices, c, tol=1e-11, method="newton", callback=lambda i, e, r: energies.append(e))

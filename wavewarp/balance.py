@@ -62,7 +62,6 @@ class ChemicalBalance:
                 "min_concentration_time": self.min_time[world],
                 "min_area_ratio": float(self.min_area_ratio[world]) if recorded else None}  # fmt: skip
 
-
     def min_concentration_between(self, start: float, end: float, world: int = 0) -> float | None:
         """World `world`'s smallest field value over the recorded frames with start <= time <= end (None if none)."""
         values = [minima[world] for time, minima in self.frame_minima if start <= time <= end]

@@ -19,6 +19,7 @@ import warp as wp
 
 from .checks import positive
 from .geometry import evaluate, quadrature_points, spread_quadrature_forces
+from .kernels import contact as kernels_contact
 from .kernels import drag as kernels_drag
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import self_contact as kernels_self_contact
@@ -31,7 +32,8 @@ class Drag:
     length `set_interval(Δt)` that start where `begin_step(x)` finds the surface. Before any `begin_step` every
     anchor is at the rest shape."""
 
-    modules = (kernels_drag, kernels_limit_surface, kernels_self_contact)
+    # the modules of its launches (the drag; the quadrature points; their spread and gathered forces)
+    modules = (kernels_drag, kernels_limit_surface, kernels_contact, kernels_self_contact)
     rigid_invariant = False  # it holds rigid motions: the Newton finish must not project them out (wavewarp/newton.py)
 
     def __init__(self, shell, *, drag):  # one ζ, or one per batched world
