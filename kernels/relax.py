@@ -276,6 +276,19 @@ def restart_kernel(flags: wp.array(dtype=wp.int32), s: wp.array(dtype=Any), dire
     direction[i] = s[i]
 
 
+@wp.kernel
+def outcome_kernel(flags: wp.array(dtype=wp.int32), failed: wp.array(dtype=wp.int32),
+                   counts: wp.array(dtype=wp.int32)):
+    """One thread per world, after a relaxation embedded in a step: failed[w] = 1 where it did not converge (kept
+    until the caller clears it); counts[2w] += its iterations, counts[2w + 1] += 1."""
+    w = wp.tid()
+    f = w * FLAGS_SIZE
+    if flags[f + STATUS] != CONVERGED:
+        failed[w] = 1
+    counts[2 * w] = counts[2 * w] + flags[f + ITERATION]
+    counts[2 * w + 1] = counts[2 * w + 1] + 1
+
+
 _V, _S = "vec3[]", "scalar[]"
 declare_overloads(start_kernel, forces=_V, inverse_stiffness=_S, s=_V, direction=_V, sums=_S, largest=_S)
 declare_overloads(start_search_kernel, sums=_S, largest=_S)
