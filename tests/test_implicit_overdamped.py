@@ -125,7 +125,7 @@ def test_a_step_whose_minimisation_does_not_converge_is_an_error_with_the_state_
     shell = Shell(icosphere(1.0, 1), thickness=0.1, young=1e3, device=device, dtype="float64")
     x0 = shell.mesh.vertices * 1.05
     dynamics = ImplicitOverdampedDynamics(shell, density=1.0, drag=5.0, x0=x0, dt=0.1, max_iterations=1)
-    with pytest.raises(ImplicitStepError, match="did not converge.*max_iterations"):
+    with pytest.raises(ImplicitStepError, match="did not converge.*raise tol or max_iterations"):
         dynamics.run_until(0.5)
     np.testing.assert_array_equal(dynamics.positions(), x0)
     assert dynamics.steps == 0

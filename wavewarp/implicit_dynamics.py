@@ -29,7 +29,8 @@ from .kernels import drag as kernels_drag
 from .kernels import relax as kernels_relax
 from .kernels.dynamics import eval_extrapolate, eval_implicit_anchors, eval_speed_runaway, eval_step_velocity
 from .kernels.implicit_contact import eval_implicit_ground
-from .relax import Relaxation, _inverse_stiffness
+from .kernels.relax import BUDGET_SPENT
+from .relax import ROUND_OFF_SLACK, Relaxation, _inverse_stiffness
 from .waves import BlowUpError
 
 # the step's relaxation: its tolerance (a residual strain, max |F| / (Y h ℓ̄), as Shell.relax) by dtype and its budget
@@ -164,11 +165,13 @@ class ImplicitOverdampedDynamics(OverdampedDynamics):
         if failure is None or not len(failed):
             return failure
         worlds = "" if self.shell.worlds == 1 else f" in world{'s' * (len(failed) > 1)} {', '.join(map(str, failed))}"
+        budget = BUDGET_SPENT in self.solver.failed.numpy()
+        why = (f"within {self.solver.max_iterations} iterations; reduce dt, or raise tol or max_iterations" if budget else
+               f"(no lower energy: the round-off floor, above {ROUND_OFF_SLACK:g} × tol); use dtype float64 or a larger tol")
         return ImplicitStepError(
             f"a step of the {self.scheme} did not converge{worlds} between t = {time:.6g} and t = {time + duration:.6g}: "
-            f"its minimisation stopped short of max|F|/(Y h ℓ̄) <= {self.solver.tol:g} within {self.solver.max_iterations} "
-            f"iterations; the state is restored to t = {time:.6g}. Reduce dt, or raise tol or max_iterations",
-            time, self.steps,
+            f"its minimisation stopped short of max|F|/(Y h ℓ̄) <= {self.solver.tol:g} {why}. The state is restored to "
+            f"t = {time:.6g}", time, self.steps,
         )
 
     def mean_iterations(self) -> np.ndarray:

@@ -163,11 +163,13 @@ class Relaxation:
 
     def solve(self, start: wp.array, out: wp.array, failed: wp.array, counts: wp.array) -> None:
         """A relaxation inside a caller's step (capturable; `prepare` first, no self-contact): from `start` into `out`;
-        failed[w] = 1 where world w did not converge; counts[2w], counts[2w + 1] += its iterations, 1."""
+        failed[w] = its status where world w did not converge (BUDGET_SPENT, or NO_DESCENT, a round-off floor, above
+        ROUND_OFF_SLACK × tol); counts[2w], counts[2w + 1] += its iterations, 1."""
         wp.copy(self.x, start)
         self._solve()
         wp.copy(out, self.x)
-        wp.launch(outcome_kernel, dim=self.shell.worlds, inputs=[self.flags], outputs=[failed, counts],
+        wp.launch(outcome_kernel, dim=self.shell.worlds, inputs=[self.flags, self.search, wp.float64(ROUND_OFF_SLACK)],
+                  outputs=[failed, counts],
                   device=self.shell.device)
 
     def forget_graphs(self) -> None:
