@@ -1,5 +1,6 @@
 """Shell dynamics of the walkers (docs/theory/dynamics.md): symplectic Euler with lumped mass, or the
-overdamped mobility model (explicit Euler on M ζ v = F). Each kernel with its launcher (below).
+overdamped mobility model (explicit Euler on M ζ v = F, or its implicit step's anchors and velocity). Each kernel
+with its launcher (below).
 
 Batched worlds (`Mesh.union`): `worlds` equal blocks of vertices; the rigid-body sums, the rigid
 correction (5 rows per world), the trace and the flags are per world."""
@@ -135,6 +136,29 @@ def overdamped_euler_kernel(
 
 
 @wp.kernel
+def implicit_anchor_kernel(start: wp.array(dtype=Any), v: wp.array(dtype=Any), predictor: wp.array(dtype=Any),
+                           drift: Any, dt: Any, anchors: wp.array(dtype=Any)):
+    """a = x_n + dt (v − v* + g/ζ): where the implicit overdamped step's drag pulls, the step's start moved by the
+    ground's velocity change v − v* (its contact and friction, with the drag as mobility) and the gravity drift g/ζ."""
+    i = wp.tid()
+    anchors[i] = start[i] + dt * (v[i] - predictor[i] + drift)
+
+
+@wp.kernel
+def extrapolate_kernel(x: wp.array(dtype=Any), v: wp.array(dtype=Any), dt: Any, out: wp.array(dtype=Any)):
+    """out = x + dt v: the implicit step's first guess, the last step's velocity carried on."""
+    i = wp.tid()
+    out[i] = x[i] + dt * v[i]
+
+
+@wp.kernel
+def step_velocity_kernel(start: wp.array(dtype=Any), x: wp.array(dtype=Any), inverse_dt: Any, v: wp.array(dtype=Any)):
+    """v = (x − x_n) / dt: the implicit step's velocity."""
+    i = wp.tid()
+    v[i] = inverse_dt * (x[i] - start[i])
+
+
+@wp.kernel
 def reference_ramp_kernel(start: wp.array(dtype=Any), end: wp.array(dtype=Any), fraction: Any, out: wp.array(dtype=Any)):
     """out = start + fraction (end - start): the concentration the active reference follows within a chemistry step."""
     i = wp.tid()
@@ -190,6 +214,10 @@ declare_overloads(symplectic_euler_kernel, forces="vec3[]", inverse_mass="scalar
                   gravity="vec3", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(overdamped_euler_kernel, forces="vec3[]", inverse_mass="scalar[]", rigid="vec3[]",
                   inverse_drag="scalar", gravity="vec3", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
+declare_overloads(implicit_anchor_kernel, start="vec3[]", v="vec3[]", predictor="vec3[]", drift="vec3", dt="scalar",
+                  anchors="vec3[]")
+declare_overloads(extrapolate_kernel, x="vec3[]", v="vec3[]", dt="scalar", out="vec3[]")
+declare_overloads(step_velocity_kernel, start="vec3[]", x="vec3[]", inverse_dt="scalar", v="vec3[]")
 declare_overloads(reference_ramp_kernel, start="scalar[]", end="scalar[]", fraction="scalar", out="scalar[]")
 declare_overloads(first_moment_kernel, mass="scalar[]", x="vec3[]", moment="vec3[]")
 declare_overloads(trace_row_kernel, c="scalar[]", x="vec3[]", moment="vec3[]", inverse_total_mass="scalar[]",
@@ -230,6 +258,26 @@ def integrate_overdamped_euler(forces, inverse_mass, rigid, inverse_drag: float,
     g = wp.types.vector(3, s)(*gravity)
     wp.launch(overdamped_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(inverse_drag), g, s(dt),
                                                            worlds, int(move)], outputs=[x, v], device=x.device)  # fmt: skip
+
+
+@one_device
+def eval_implicit_anchors(start, v, predictor, drift, dt: float, anchors) -> None:
+    """anchors = x_n + dt (v − v* + drift) (drift = g/ζ, a vector)."""
+    s = scalar_of(anchors)
+    wp.launch(implicit_anchor_kernel, dim=len(anchors), inputs=[start, v, predictor, wp.types.vector(3, s)(*drift),
+                                                                s(dt)], outputs=[anchors], device=anchors.device)
+
+
+@one_device
+def eval_extrapolate(x, v, dt: float, out) -> None:
+    """out = x + dt v."""
+    wp.launch(extrapolate_kernel, dim=len(out), inputs=[x, v, scalar_of(out)(dt)], outputs=[out], device=out.device)
+
+
+@one_device
+def eval_step_velocity(start, x, dt: float, v) -> None:
+    """v = (x − x_n) / dt."""
+    wp.launch(step_velocity_kernel, dim=len(v), inputs=[start, x, scalar_of(v)(1.0 / dt)], outputs=[v], device=v.device)
 
 
 @one_device

@@ -276,6 +276,22 @@ def restart_kernel(flags: wp.array(dtype=wp.int32), s: wp.array(dtype=Any), dire
     direction[i] = s[i]
 
 
+@wp.kernel
+def outcome_kernel(flags: wp.array(dtype=wp.int32), search: wp.array(dtype=wp.float64), slack: wp.float64,
+                   failed: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
+    """One thread per world, after a relaxation embedded in a step: failed[w] = its status where it did not converge
+    (BUDGET_SPENT, or NO_DESCENT above `slack` × tol: within it, the dtype's round-off floor is accepted); kept until
+    the caller clears it; counts[2w] += its iterations, counts[2w + 1] += 1."""
+    w = wp.tid()
+    f, b = w * FLAGS_SIZE, w * SEARCH_SIZE
+    status = flags[f + STATUS]
+    floor = status == NO_DESCENT and search[b + RESIDUAL] <= slack * search[b + TOL]
+    if status != CONVERGED and not floor:
+        failed[w] = status
+    counts[2 * w] = counts[2 * w] + flags[f + ITERATION]
+    counts[2 * w + 1] = counts[2 * w + 1] + 1
+
+
 _V, _S = "vec3[]", "scalar[]"
 declare_overloads(start_kernel, forces=_V, inverse_stiffness=_S, s=_V, direction=_V, sums=_S, largest=_S)
 declare_overloads(start_search_kernel, sums=_S, largest=_S)

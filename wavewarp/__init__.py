@@ -5,6 +5,7 @@ from .chemistry import FitzHughNagumoSolver, TelegraphSolver
 from .coupled import QuasiStatic, Walking
 from .driver import simulate
 from .dynamics import Ground, InertialSolver, OverdampedDynamics, OverdampedSolver, ShellDynamics
+from .implicit_dynamics import ImplicitOverdampedDynamics, ImplicitOverdampedSolver, ImplicitStepError
 from .geometry import LimitSurface, limit_positions, limit_surface, sample_points
 from .initial import gaussian_pulse, steady_front
 from .laplace import LaplaceBeltrami
@@ -19,7 +20,8 @@ from .state import State
 from .waves import BlowUpError, FitzHughNagumo, OscillationError, Telegraph, TimeStepError
 
 __all__ = [
-    "BilayerReference", "BlowUpError", "FitzHughNagumo", "FitzHughNagumoSolver", "Ground", "InertialSolver",
+    "BilayerReference", "BlowUpError", "FitzHughNagumo", "FitzHughNagumoSolver", "Ground", "ImplicitOverdampedDynamics",
+    "ImplicitOverdampedSolver", "ImplicitStepError", "InertialSolver",
     "KoiterReference", "LaplaceBeltrami", "LimitSurface", "Mesh", "Model", "ModelBuilder", "OscillationError",
     "OverdampedDynamics", "OverdampedSolver", "QuasiStatic", "RelaxationError", "RestingGround", "SelfContact", "Shell",
     "ShellDynamics", "State", "Telegraph", "TelegraphSolver", "TimeStepError", "Walking",

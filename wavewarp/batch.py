@@ -30,7 +30,7 @@ from .mesh import Mesh
 from .parameters import as_dict
 from .runs import WaveClock, imperfect, mean_edge
 from .walker import (AUTO_DT_SAFETY, TRACE_COLUMNS, check_walker_steps, place_walker, restore_walk,
-                     settled_walker_dynamics, walker_model)
+                     implicit_step, settled_walker_dynamics, walker_model)
 
 PER_WORLD = ("AC", "AI", "thickness", "young", "mu_v", "tau_m", "mirror", "noise", "elongation")  # and the seed: the rest is shared
 
@@ -153,6 +153,8 @@ class WalkerBatch(WorldsRun):
             self._trace_row = wp.zeros(self.worlds, dtype=wp.int32)
             columns = self.worlds * (TRACE_COLUMNS - 1)
             self._trace_rows = wp.zeros((self.steps_per_frame, columns), dtype=self.shell.scalar)
+        if p.mechanics == "overdamped-implicit":
+            self.dynamics.set_time_step(implicit_step(p, dt))
         self.coupled = Walking(self.dynamics, self.wave, sensitive=p.sensitive, recorder=self._record_trace_row,
                                ramp=p.ramp)  # fmt: skip
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))

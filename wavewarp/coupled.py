@@ -314,10 +314,9 @@ class Walking:
         self.ramp = bool(ramp) and self.substeps > 1  # one substep: the ramp's only value is c¹
         self.shell.update_reference(wave.c)
         self._c_start, self._c_ramp = wp.empty_like(wave.c), wp.empty_like(wave.c)
-        modules = (kernels.laplace, kernels.waves, kernels.shell, kernels.contact, kernels.implicit_contact, kernels.dynamics, kernels.limit_surface,
-                   kernels.reduce)  # fmt: skip
+        modules = (kernels.laplace, kernels.waves, *dynamics.runner.modules)
         self.runner = GuardedRunner(self._step, protected=self._protected, check=self._check,
-                                    reset=wave.solver.reset_checks, restore=self._restore, device=self.shell.device,
+                                    reset=self._reset_checks, restore=self._restore, device=self.shell.device,
                                     modules=modules, capture=dynamics.capture and wave.capture,
                                     check_every=check_every, graph_steps=max(1, GRAPH_SUBSTEPS // self.substeps))  # fmt: skip
         self.shell.listen(self.notify_model_changed)
@@ -336,6 +335,10 @@ class Walking:
     def notify_model_changed(self) -> None:
         """The shell's V̄ or terms changed: the captured steps are captured anew."""
         self.runner.invalidate()
+
+    def _reset_checks(self) -> None:
+        self.wave.solver.reset_checks()
+        self.dynamics.solver.reset_checks()
 
     def _protected(self) -> list:
         return self.wave.state.arrays() + [self.dynamics.state.x, self.dynamics.state.v]

@@ -9,6 +9,9 @@ of ζ ṗ = f per unit rest area of the limit surface (docs/theory/transport.md,
 
 As Δt/ζ grows the step tends to the quasi-static equilibrium; for a finite ratio the shell relaxes towards it at
 the rate its stiffness over ζ sets, so an instability grows per unit time rather than per step.
+
+`LumpedDrag` is the walkers' form (wavewarp/implicit_dynamics.py): ζ per unit mass on the control points' lumped
+masses M_I, ½ (ζ M_I/Δt) |x_I − a_I|², the mass matrix of the explicit overdamped solver.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from .kernels import contact as kernels_contact
 from .kernels import drag as kernels_drag
 from .kernels import limit_surface as kernels_limit_surface
 from .kernels import self_contact as kernels_self_contact
-from .kernels.drag import eval_drag
+from .kernels.drag import eval_drag, eval_lumped_drag
 from .shell import per_world
 
 
@@ -84,3 +87,39 @@ class Drag:
         twin.interval = self.interval
         twin.coefficient.assign(self.coefficient.numpy().astype(twin.shell._real))
         twin.anchors.assign(self.anchors.numpy().astype(twin.shell._real))
+
+
+class LumpedDrag:
+    """½ Σ_I k_I |x_I − a_I|² on the control points, k_I = ζ M_I / Δt (`set_stiffness`): the drag of the implicit
+    overdamped walker step, the explicit solver's lumped masses M_I. The anchors a are set on the device
+    (`anchors`, `begin_step`); where a = x the term adds nothing."""
+
+    modules = (kernels_drag,)
+    rigid_invariant = False  # it holds rigid motions
+
+    def __init__(self, shell):
+        self.shell = shell
+        n = shell.mesh.n_vertices
+        self.points_per_world = len(shell._energy_density) // shell.worlds
+        if self.points_per_world < shell.mesh.vertices_per_world:
+            raise ValueError("LumpedDrag adds each control point's energy to a quadrature point of its world: the "
+                             "mesh has fewer quadrature points than vertices per world")
+        with wp.ScopedDevice(shell.device):
+            self.anchors = wp.array(shell.mesh.vertices.astype(shell._real), dtype=shell.vec3)
+            self.stiffness = wp.zeros(n, dtype=shell.scalar)
+            self._no_forces = wp.zeros(1, dtype=shell.vec3)
+
+    def set_stiffness(self, stiffness) -> None:
+        """k_I = ζ M_I / Δt per control point (host values, set outside captures)."""
+        self.stiffness.assign(stiffness.astype(self.shell._real))
+
+    def begin_step(self, x: wp.array) -> None:
+        """Every anchor where x is: the term's force and energy vanish there."""
+        wp.copy(self.anchors, x)
+
+    def add_forces(self, x: wp.array, forces: wp.array | None, energy_density: wp.array | None) -> None:
+        """forces += −∂E/∂x (when given); energy_density += E, per world (when given). Capturable."""
+        with_forces, with_energy = forces is not None, energy_density is not None
+        density = energy_density if with_energy else self.shell._energy_density
+        eval_lumped_drag(x, self.anchors, self.stiffness, self.points_per_world, with_forces, with_energy,
+                         forces if with_forces else self._no_forces, density)

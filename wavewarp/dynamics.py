@@ -300,6 +300,9 @@ class InertialSolver:
         integrate_symplectic_euler(self._forces, self._inverse_mass, self._rigid, self.damping, self.gravity_vector, dt,
                                    self.worlds, x, v, move)  # fmt: skip
 
+    def reset_checks(self) -> None:
+        """Clear what a chunk's steps flag (nothing here: the speed check runs after the chunk)."""
+
     def launch_checks(self, state: State, limit: float) -> None:
         """flag[w] = 1 where some |v_I| of world w passed `limit` or is NaN/Inf (read by the caller)."""
         self.flag.zero_()

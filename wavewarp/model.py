@@ -29,6 +29,7 @@ import numpy as np
 from .checks import plain, positive
 from .chemistry import FitzHughNagumoSolver, TelegraphSolver
 from .dynamics import Ground, InertialSolver, OverdampedDynamics, OverdampedSolver, ShellDynamics
+from .implicit_dynamics import ImplicitOverdampedDynamics, ImplicitOverdampedSolver
 from .laplace import LaplaceBeltrami
 from .mesh import Mesh
 from .self_contact import SelfContact
@@ -83,16 +84,21 @@ class Model:
         kind = Telegraph if self.chemistry.kind == "telegraph" else FitzHughNagumo
         return kind(operator, **self._chemistry_options(), **options)
 
-    def mechanics(self, *, overdamped: bool = False, **options):
+    def mechanics(self, *, overdamped: bool = False, implicit: bool = False, **options):
         """The shell dynamics' solver with the model's gravity and ground: inertial (options: damping) or
-        overdamped (options: drag)."""
-        kind = OverdampedSolver if overdamped else InertialSolver
+        overdamped (options: drag), with `implicit` its backward-Euler step (options: drag, tol, max_iterations)."""
+        if implicit and not overdamped:
+            raise ValueError("implicit=True is the overdamped mechanics' backward-Euler step: give overdamped=True too")
+        kind = ImplicitOverdampedSolver if implicit else OverdampedSolver if overdamped else InertialSolver
         return kind(self.shell, density=self.density, gravity=self.gravity, ground=self.ground, **options)
 
-    def dynamics(self, *, overdamped: bool = False, **options):
-        """Ready-to-run shell dynamics (`ShellDynamics` or `OverdampedDynamics`: solver, state, time step)
-        with the model's gravity and ground; `options` are the stepper's (damping or drag, x0, dt, safety, ...)."""
-        kind = OverdampedDynamics if overdamped else ShellDynamics
+    def dynamics(self, *, overdamped: bool = False, implicit: bool = False, **options):
+        """Ready-to-run shell dynamics (`ShellDynamics`, `OverdampedDynamics`, or with `implicit` the backward-Euler
+        `ImplicitOverdampedDynamics`: solver, state, time step) with the model's gravity and ground; `options` are
+        the stepper's (damping or drag, x0, dt, safety, ...)."""
+        if implicit and not overdamped:
+            raise ValueError("implicit=True is the overdamped mechanics' backward-Euler step: give overdamped=True too")
+        kind = ImplicitOverdampedDynamics if implicit else OverdampedDynamics if overdamped else ShellDynamics
         return kind(self.shell, density=self.density, gravity=self.gravity, ground=self.ground, **options)
 
 

@@ -36,6 +36,7 @@ from .kernels.relax import (
     direction_kernel,
     iteration_kernel,
     line_search_kernel,
+    outcome_kernel,
     restart_kernel,
     resume_kernel,
     slope_kernel,
@@ -148,6 +149,28 @@ class Relaxation:
                 modules += term.modules
             run_steps(solve, 1, device=shell.device, graphs=graphs, modules=modules, capture=self.capture)
         return self._result(tol, out)
+
+    def prepare(self, tol: float, max_iterations: int) -> None:
+        """Set every world's tolerance and budget for `solve` (on the host, outside captures)."""
+        shell, worlds = self.shell, self.shell.worlds
+        self.history = wp.zeros((max_iterations + 1) * worlds, dtype=wp.float64, device=shell.device)
+        self.forget_graphs()
+        search = self.search.numpy().reshape(worlds, SEARCH_SIZE)
+        search[:, TOL:] = np.column_stack([np.full(worlds, tol), np.full(worlds, max_iterations),
+                                           np.broadcast_to(shell.force_scale(), worlds),
+                                           np.full(worlds, ENERGY_NOISE[shell.scalar])])
+        self.search.assign(search.ravel())
+
+    def solve(self, start: wp.array, out: wp.array, failed: wp.array, counts: wp.array) -> None:
+        """A relaxation inside a caller's step (capturable; `prepare` first, no self-contact): from `start` into `out`;
+        failed[w] = its status where world w did not converge (BUDGET_SPENT, or NO_DESCENT, a round-off floor, above
+        ROUND_OFF_SLACK × tol); counts[2w], counts[2w + 1] += its iterations, 1."""
+        wp.copy(self.x, start)
+        self._solve()
+        wp.copy(out, self.x)
+        wp.launch(outcome_kernel, dim=self.shell.worlds, inputs=[self.flags, self.search, wp.float64(ROUND_OFF_SLACK)],
+                  outputs=[failed, counts],
+                  device=self.shell.device)
 
     def forget_graphs(self) -> None:
         """Drop the captured loops (they hold the arrays and terms they were captured with)."""

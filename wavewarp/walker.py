@@ -72,8 +72,12 @@ class WalkerParameters:
     damping: float = param(0.2, "damping η of the vibrations relative to the rigid-body motion (inertial mechanics)",
                            minimum=0.0)  # fmt: skip
     mechanics: str = param("overdamped", "overdamped: the mobility model ζ M v = F, the paper's (with Coulomb friction "
-                           "the friction-dominated regime); inertial: symplectic Euler with lumped mass",
-                           choices=("overdamped", "inertial"))  # fmt: skip
+                           "the friction-dominated regime), explicit Euler under its bending-stiffness bound; "
+                           "overdamped-implicit: the same model by backward Euler, implicit_substeps steps per chemistry "
+                           "step and no stability bound (needs contact_solve=implicit); inertial: symplectic Euler with "
+                           "lumped mass", choices=("overdamped", "overdamped-implicit", "inertial"))  # fmt: skip
+    implicit_substeps: int = param(1, "overdamped-implicit mechanics: backward-Euler steps per chemistry step (accuracy "
+                                   "sets them, not the bending stiffness)", minimum=1)  # fmt: skip
     drag: float = param(60.0, "overdamped mechanics: drag ζ per unit mass, a property of the medium, the same at every "
                         "level (60 ≈ 2 η_ground of the level-4 sphere); auto (0) = 2 η_ground of the mesh, which the "
                         "explicit contact needs", minimum=0.0, auto=True)  # fmt: skip
@@ -153,7 +157,9 @@ def place_walker(mesh: Mesh, p, origin) -> Placement:
         per = p.contact_area or area / mesh.n_vertices
     if p.sharpness == math.inf and p.contact_solve != "implicit":
         raise SceneError("sharpness=inf (Coulomb's law) needs the implicit contact: --set contact_solve=implicit")
-    if p.drag_frame == "body" and (p.mechanics != "overdamped" or p.contact_solve != "implicit"):
+    if p.mechanics == "overdamped-implicit" and p.contact_solve != "implicit":
+        raise SceneError("mechanics=overdamped-implicit solves the ground implicitly: --set contact_solve=implicit")
+    if p.drag_frame == "body" and (not p.mechanics.startswith("overdamped") or p.contact_solve != "implicit"):
         raise SceneError("drag_frame=body is a drag of the overdamped mechanics that leaves the translation to the "
                          "friction: --set mechanics=overdamped --set contact_solve=implicit")  # fmt: skip
     if p.slope > 60.0:
@@ -187,9 +193,19 @@ def walker_model(mesh: Mesh, ps: list, ground: Ground, *, size: float, bilayer: 
     return builder.finalize()
 
 
+def implicit_step(p, chemistry_dt=None) -> float:
+    """The overdamped-implicit mechanics' step: the chemistry step over `implicit_substeps` (before the wave is built,
+    while settling, the scene's dt, or the parameter's default where dt is auto)."""
+    return (chemistry_dt or p.dt or WalkerParameters.dt) / p.implicit_substeps
+
+
 def walker_dynamics(model, p, dt=None):
     """The walkers' inertial (or overdamped) shell dynamics on `model`, bound by ω over the references the
-    wave visits (`bound_over_reference_range`); its step `dt` (None: safety × the bound)."""
+    wave visits (`bound_over_reference_range`); its step `dt` (None: safety × the bound; overdamped-implicit:
+    `implicit_step`, no bound)."""
+    if p.mechanics == "overdamped-implicit":
+        return model.dynamics(overdamped=True, implicit=True, drag=p.drag or None, drag_frame=p.drag_frame,
+                              dt=dt or implicit_step(p))
     if p.mechanics == "overdamped":
         dynamics = model.dynamics(overdamped=True, drag=p.drag or None, drag_frame=p.drag_frame, safety=p.safety)
     else:
@@ -206,7 +222,7 @@ def settled_walker_dynamics(model, p, settle_dt=None):
     inertial alone, the body's bounce on the ground rings on. `settle_dt`: the step while settling, or
     for an overdamped walker the pair (inertial, overdamped); None: safety × each bound. Returns
     (dynamics, the step or pair used, as `settle_dt` takes it, and the steps taken with each)."""
-    if p.mechanics != "overdamped":
+    if not p.mechanics.startswith("overdamped"):
         dynamics = walker_dynamics(model, p, settle_dt)
         dynamics.run_until(p.settle)
         return dynamics, dynamics.dt, (dynamics.steps,)
@@ -282,13 +298,15 @@ class WalkerRun(WaveClock):
             self._origin = wp.array([self.origin_vertex], dtype=wp.int32)
             self._trace_row = wp.zeros(1, dtype=wp.int32)
             self._trace_rows = wp.zeros((self.steps_per_frame, TRACE_COLUMNS - 1), dtype=self.shell.scalar)
+        if p.mechanics == "overdamped-implicit":
+            self.dynamics.set_time_step(implicit_step(p, dt))
         self.coupled = Walking(self.dynamics, self.wave, sensitive=p.sensitive, recorder=self._record_trace_row,
                                ramp=p.ramp)  # fmt: skip
         self.frames = max(1, round(t_end / (self.steps_per_frame * self.wave.dt)))
         if self.frames < p.frames:
             report(f"{self.frames} frames, not the {p.frames} asked for: a frame holds whole chemistry steps of dt = "
                    f"{dt:.4g} over {t_end:.4g}; --set dt=auto (or a smaller dt) gives every frame")  # fmt: skip
-        drag = self.dynamics.drag if p.mechanics == "overdamped" else 0.0
+        drag = self.dynamics.drag if p.mechanics.startswith("overdamped") else 0.0
         resolved = replace(p, width=width, drag=drag, dt=dt, contact_area=per if p.contact == "area" else 0.0)
         self.resolved = {**as_dict(resolved), "mechanics_dt": self.dynamics.dt, "substeps": self.coupled.substeps,
                          "period_kinetic": self.period_kinetic}  # fmt: skip
