@@ -66,6 +66,46 @@ def fhn_explicit_kernel(
 
 
 @wp.kernel
+def fhn_heun_predictor_kernel(
+    acceleration: wp.array(dtype=Any), mass: wp.array(dtype=Any), gamma2: Any, nu: Any, kappa: Any, epsilon: Any,
+    dt: Any, c: wp.array(dtype=Any), w: wp.array(dtype=Any), c_stage: wp.array(dtype=Any),
+    w_stage: wp.array(dtype=Any), rate_c: wp.array(dtype=Any), rate_w: wp.array(dtype=Any),
+    produced: wp.array(dtype=Any),
+):
+    """Heun's first stage: the rates at step n (as `fhn_explicit_kernel`) and the Euler predictor c̃ = c + dt ċ,
+    w̃ = w + dt ẇ; `produced` gains half the step's Euler amount, dt/2 M (f(c) - w)."""
+    i = wp.tid()
+    ci = c[i]
+    wi = w[i]
+    reaction = fhn_reaction(ci, nu) - wi
+    rc = reaction - gamma2 * acceleration[i]
+    rw = epsilon * (ci - kappa * wi)
+    rate_c[i] = rc
+    rate_w[i] = rw
+    c_stage[i] = ci + dt * rc
+    w_stage[i] = wi + dt * rw
+    produced[i] = produced[i] + type(dt)(0.5) * dt * mass[i] * reaction
+
+
+@wp.kernel
+def fhn_heun_corrector_kernel(
+    acceleration: wp.array(dtype=Any), mass: wp.array(dtype=Any), gamma2: Any, nu: Any, kappa: Any, epsilon: Any,
+    dt: Any, c_stage: wp.array(dtype=Any), w_stage: wp.array(dtype=Any), rate_c: wp.array(dtype=Any),
+    rate_w: wp.array(dtype=Any), c: wp.array(dtype=Any), w: wp.array(dtype=Any), produced: wp.array(dtype=Any),
+):
+    """Heun's second stage: c += dt/2 (ċ(n) + ċ(c̃, w̃)), w likewise (`acceleration` = M̃⁻¹K c̃); `produced` gains
+    dt/2 M (f(c̃) - w̃)."""
+    i = wp.tid()
+    half = type(dt)(0.5) * dt
+    cs = c_stage[i]
+    ws = w_stage[i]
+    reaction = fhn_reaction(cs, nu) - ws
+    c[i] = c[i] + half * (rate_c[i] + reaction - gamma2 * acceleration[i])
+    w[i] = w[i] + half * (rate_w[i] + epsilon * (cs - kappa * ws))
+    produced[i] = produced[i] + half * mass[i] * reaction
+
+
+@wp.kernel
 def fhn_imex_rhs_kernel(c: wp.array(dtype=Any), w: wp.array(dtype=Any), mass: wp.array(dtype=Any), nu: Any, dt: Any,
                         rhs: wp.array(dtype=Any), produced: wp.array(dtype=Any)):  # fmt: skip
     """Right-hand side of (M + dt γ² K) c^{n+1} = M (c^n + dt (f(c^n) - w^n)); `produced` gains dt M (f - w)."""
@@ -215,6 +255,10 @@ _S = "scalar[]"
 declare_overloads(telegraph_kernel, acceleration=_S, gamma2="scalar", damping="scalar", dt="scalar", c=_S, v=_S)
 declare_overloads(fhn_explicit_kernel, acceleration=_S, mass=_S, gamma2="scalar", nu="scalar", kappa="scalar",
                   epsilon="scalar", dt="scalar", c=_S, w=_S, produced=_S)  # fmt: skip
+declare_overloads(fhn_heun_predictor_kernel, acceleration=_S, mass=_S, gamma2="scalar", nu="scalar", kappa="scalar",
+                  epsilon="scalar", dt="scalar", c=_S, w=_S, c_stage=_S, w_stage=_S, rate_c=_S, rate_w=_S, produced=_S)
+declare_overloads(fhn_heun_corrector_kernel, acceleration=_S, mass=_S, gamma2="scalar", nu="scalar", kappa="scalar",
+                  epsilon="scalar", dt="scalar", c_stage=_S, w_stage=_S, rate_c=_S, rate_w=_S, c=_S, w=_S, produced=_S)
 declare_overloads(fhn_imex_rhs_kernel, c=_S, w=_S, mass=_S, nu="scalar", dt="scalar", rhs=_S, produced=_S)
 declare_overloads(transport_kernel, old_mass=_S, mass=_S, values=_S)
 declare_overloads(first_crossing_kernel, c=_S, level="scalar")
@@ -260,6 +304,27 @@ def eval_fhn_explicit(acceleration, mass, gamma: float, nu: float, kappa: float,
     wp.launch(fhn_explicit_kernel, dim=len(c),
               inputs=[acceleration, mass, s(gamma**2), s(nu), s(kappa), s(epsilon), s(dt)], outputs=[c, w, produced],
               device=c.device)  # fmt: skip
+
+
+@one_device
+def eval_fhn_heun_predictor(acceleration, mass, gamma: float, nu: float, kappa: float, epsilon: float, dt: float, c, w,
+                            c_stage, w_stage, rate_c, rate_w, produced) -> None:
+    """Heun's first stage of a FitzHugh–Nagumo step (`fhn_heun_predictor_kernel`)."""
+    s = scalar_of(c)
+    wp.launch(fhn_heun_predictor_kernel, dim=len(c),
+              inputs=[acceleration, mass, s(gamma**2), s(nu), s(kappa), s(epsilon), s(dt), c, w],
+              outputs=[c_stage, w_stage, rate_c, rate_w, produced], device=c.device)
+
+
+@one_device
+def eval_fhn_heun_corrector(acceleration, mass, gamma: float, nu: float, kappa: float, epsilon: float, dt: float,
+                            c_stage, w_stage, rate_c, rate_w, c, w, produced) -> None:
+    """Heun's second stage of a FitzHugh–Nagumo step (`fhn_heun_corrector_kernel`)."""
+    s = scalar_of(c)
+    wp.launch(fhn_heun_corrector_kernel, dim=len(c),
+              inputs=[acceleration, mass, s(gamma**2), s(nu), s(kappa), s(epsilon), s(dt), c_stage, w_stage, rate_c,
+                      rate_w],
+              outputs=[c, w, produced], device=c.device)
 
 
 @one_device

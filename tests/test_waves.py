@@ -467,7 +467,7 @@ def test_steady_front_profile_and_outgoing_velocity():
         (lambda op: Telegraph(op, 1.0, c0=np.zeros(162), safety=1.5), r"safety must lie in \(0, 1\]"),
         (lambda op: Telegraph(op, 1.0, c0=np.zeros(162), mass_corrections=-1), "mass_corrections must be an integer"),
         (lambda op: Telegraph(op.mesh, 1.0, c0=np.zeros(162)), "operator must be a wavewarp.LaplaceBeltrami"),
-        (lambda op: FitzHughNagumo(op, c0=np.zeros(162), scheme="rk4"), "scheme must be one of explicit, imex"),
+        (lambda op: FitzHughNagumo(op, c0=np.zeros(162), scheme="rk4"), "scheme must be one of explicit, heun, imex"),
         (lambda op: FitzHughNagumo(op, c0=np.zeros(162), scheme="imex", mass_corrections=1), "lumped mass"),
         (lambda op: gaussian_pulse(op, 1000, 0.1, gamma=1.0), r"origin vertex must lie in \[0, 162\)"),
         (lambda op: gaussian_pulse(op, 0, 0.1, gamma=1.0, distance="manhattan"), "distance must be"),

@@ -23,6 +23,8 @@ import warp as wp
 from .checks import count, finite, plain, positive
 from .kernels.waves import (
     eval_fhn_explicit,
+    eval_fhn_heun_corrector,
+    eval_fhn_heun_predictor,
     eval_fhn_imex_rhs,
     eval_fhn_inhibitor,
     eval_flip,
@@ -35,7 +37,7 @@ from .laplace import LaplaceBeltrami
 from .shifted_solve import ShiftedMassSolver
 from .state import State
 
-FHN_SCHEMES = ("explicit", "imex")
+FHN_SCHEMES = ("explicit", "heun", "imex")
 TRANSPORTS = ("conservative", "material")
 # FHN flip detector (docs/theory/chemistry.md): a vertex stops the run after FLIP_STEPS steps in a row
 # whose increment d = c^{n+1} - c^n flips sign, exceeds FLIP_FLOOR × max(1, |c0|, |w0|) (float32
@@ -246,7 +248,9 @@ class FitzHughNagumoSolver(ChemistrySolver):
     """`c_t = γ² Δ_LB c + c(1-c)(c-ν) - w`, `w_t = ε (c - κ w)` (reaction on control values).
 
     scheme="explicit": Euler, stable while dt < 2 / (γ² λ_max(M̃⁻¹K) + L_f), L_f the largest |f'| on
-    [0, 1]. scheme="imex": (M + dt γ² K) c^{n+1} = M (c^n + dt (f(c^n) - w^n)) by Jacobi-preconditioned
+    [0, 1]. scheme="heun": Heun's second-order Runge–Kutta step (an Euler predictor, then the trapezoid of its two
+    rates), the same bound (its stability interval on the real axis is Euler's [-2, 0]) at two operator applications
+    a step; the walkers' front speed is first order in dt under Euler (docs/theory/chemistry.md). scheme="imex": (M + dt γ² K) c^{n+1} = M (c^n + dt (f(c^n) - w^n)) by Jacobi-preconditioned
     CG on the device (relative tolerance `tol`), then w^{n+1} = (w^n + dt ε c^{n+1}) / (1 + dt ε κ): no
     diffusive limit, stable while dt < 2 / L_f (lumped mass only). After each step a per-vertex detector
     (`flip_kernel`) flags a bounded period-2 flip-flop, the instability of a dt past the bound that does
@@ -261,8 +265,10 @@ class FitzHughNagumoSolver(ChemistrySolver):
         if scheme == "imex" and mass_corrections:
             raise ValueError("scheme='imex' solves with the lumped mass: mass_corrections must be 0")
         super().__init__(operator, mass_corrections=mass_corrections, transport=transport)
-        self.scheme = f"FitzHugh–Nagumo {scheme} Euler"
-        self.bound_formula = "dt < 2 / (γ² λ_max + L_f)" if scheme == "explicit" else "dt < 2 / L_f"
+        self.scheme = {"explicit": "FitzHugh–Nagumo explicit Euler", "heun": "FitzHugh–Nagumo Heun (RK2)",
+                       "imex": "FitzHugh–Nagumo imex Euler"}[scheme]
+        self.bound_formula = "dt < 2 / L_f" if scheme == "imex" else "dt < 2 / (γ² λ_max + L_f)"
+        self.heun = scheme == "heun"
         self.implicit = scheme == "imex"
         self.gamma = positive("gamma", gamma)
         self.nu, self.kappa = finite("nu", nu), finite("kappa", kappa)
@@ -276,6 +282,8 @@ class FitzHughNagumoSolver(ChemistrySolver):
                 tol = 1e-5 if self.scalar == wp.float32 else 1e-10
             self.cg = ShiftedMassSolver(operator, positive("tol", tol), count("max_cg_iterations", max_cg_iterations, 1))
             self._rhs = wp.empty(operator.n_vertices, dtype=self.scalar, device=self.device)
+        if self.heun:  # the predictor c̃, w̃ and the rates at step n
+            self._stage = [wp.empty(operator.n_vertices, dtype=self.scalar, device=self.device) for _ in range(4)]
 
     def _bound(self, eigenvalue: float) -> float:
         if self.implicit:
@@ -303,6 +311,14 @@ class FitzHughNagumoSolver(ChemistrySolver):
             eval_fhn_imex_rhs(c, w, self.operator.mass_device, self.nu, dt, self._rhs, h["produced"])
             self.cg.solve(self._rhs, c)
             eval_fhn_inhibitor(c, self.epsilon, self.kappa, dt, w)
+        elif self.heun:
+            mass, c_stage, w_stage, rate_c, rate_w = self.operator.mass_device, *self._stage
+            self.diffusion_acceleration(c)
+            eval_fhn_heun_predictor(self.acceleration, mass, self.gamma, self.nu, self.kappa, self.epsilon, dt, c, w,
+                                    c_stage, w_stage, rate_c, rate_w, h["produced"])
+            self.diffusion_acceleration(c_stage)
+            eval_fhn_heun_corrector(self.acceleration, mass, self.gamma, self.nu, self.kappa, self.epsilon, dt, c_stage,
+                                    w_stage, rate_c, rate_w, c, w, h["produced"])
         else:
             self.diffusion_acceleration(c)
             eval_fhn_explicit(self.acceleration, self.operator.mass_device, self.gamma, self.nu, self.kappa, self.epsilon,

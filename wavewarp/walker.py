@@ -88,6 +88,9 @@ class WalkerParameters:
                       "less where frames asks for more frames", minimum=0.0, auto=True)  # fmt: skip
     mass_corrections: int = param(2, "Richardson steps from the lumped towards the consistent mass in the diffusion",
                                   minimum=0)  # fmt: skip
+    fhn_scheme: str = param("explicit", "chemistry step: explicit (Euler) or heun (second order, two diffusion "
+                            "applications a step; the front's speed error from dt falls from first to second order)",
+                            choices=("explicit", "heun"))
     ramp: bool = param(True, "the active reference follows c linearly over each chemistry step's mechanics substeps")
     safety: float = param(0.9, "mechanics step = dt / n, the largest within safety × its stability bound", positive=True)
     settle: float = param(40.0, "time on the ground before the wave starts, c = 0 (overdamped: this long with the "
@@ -189,7 +192,7 @@ def walker_model(mesh: Mesh, ps: list, ground: Ground, *, size: float, bilayer: 
         builder.add_volume(penalty=[q.mu_v * q.young * q.thickness / size**4 for q in ps])
     builder.add_gravity(g=p.gravity, density=p.density).add_ground(ground)
     builder.add_fitzhugh_nagumo(gamma=p.gamma, nu=p.nu, kappa=p.kappa, epsilon=p.epsilon, sensitive=p.sensitive,
-                                mass_corrections=p.mass_corrections, transport=p.transport)  # fmt: skip
+                                mass_corrections=p.mass_corrections, transport=p.transport, scheme=p.fhn_scheme)
     return builder.finalize()
 
 
