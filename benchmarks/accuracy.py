@@ -151,7 +151,7 @@ def scene_setting(scene) -> dict:
         divisions = p["divisions"] + p["divisions"] % 2
         setting.update(divisions=divisions, level=box_level(scene, divisions))
     if walker:  # explicit FHN (wavewarp/walker.py); the dynamics never relaxes: the default tolerance's radius
-        setting.update(mass_corrections=p["mass_corrections"], tol_factor=1.0)
+        setting.update(mass_corrections=p["mass_corrections"], fhn_scheme=p["fhn_scheme"], tol_factor=1.0)
     else:
         setting.update(mass_corrections=p["mass_corrections"], dt_fraction=SCENE_DT if p["dt"] == 0 else None,
                        tol_factor=1.0 if p["relax_tol"] == 0 else None)  # fmt: skip
@@ -161,7 +161,8 @@ def scene_setting(scene) -> dict:
     return {"setting": setting, "fixed": sorted(fixed)}
 
 
-AXES = ("level", "divisions", "rule", "discretization", "mass_corrections", "dt_fraction", "dtype", "tol_factor")
+AXES = ("level", "divisions", "rule", "discretization", "mass_corrections", "fhn_scheme", "dt_fraction", "dtype",
+        "tol_factor")
 
 
 def axes_of(point) -> dict:
@@ -234,6 +235,8 @@ def combined(recommendations) -> dict:
                 scene[axis] = min(scene.get(axis, value), value)
             elif axis == "dtype":
                 scene[axis] = "float64" if "float64" in (scene.get(axis), value) else "float32"
+            elif axis == "fhn_scheme":
+                scene[axis] = "heun" if "heun" in (scene.get(axis), value) else "explicit"
             elif axis == "rule":
                 scene[axis] = max(scene.get(axis, value), value, key=lambda rule: len(triangle_rule(rule)[1]))
     for name, scene in out.items():
@@ -249,6 +252,8 @@ def colour_key(case, point) -> str:
     if case == "radius":
         return f"rule {point['rule']}"
     label = LABELS[point["discretization"], point["mass_corrections"]]
+    if point.get("fhn_scheme", "explicit") != "explicit":
+        label += f", {point['fhn_scheme']}"
     return f"{label}, rule {point['rule']}" if case == "arrival" and point["rule"] not in ("3", "-") else label
 
 

@@ -82,7 +82,8 @@ PROXIES = {  # (scene, configuration): what stands in for the scene's own geomet
     ("prism-walker", "box-walker"): BOX_SPHERE, ("cube-walker", "box-walker"): BOX_SPHERE,
     ("prism-walker", "sphere"): BOX_LEVEL, ("cube-walker", "sphere"): BOX_LEVEL,
 }  # fmt: skip
-LABELS = {("subdivision", 0): "subdivision, lumped", ("subdivision", 2): "subdivision, p = 2", ("p1", 0): "P1"}
+LABELS = {("subdivision", 0): "subdivision, lumped", ("subdivision", 2): "subdivision, p = 2",
+          ("subdivision", 4): "subdivision, p = 4", ("p1", 0): "P1"}
 
 
 @functools.lru_cache(maxsize=None)
@@ -400,10 +401,10 @@ def front_references() -> dict:
     return {**reference, "without_w": front_reference(0.0)["speed"], "time_step_share": at(k["dt"]) / at(finest) - 1}
 
 
-def front_point(device, level, corrections, dtype) -> dict:
+def front_point(device, level, corrections, dtype, scheme="explicit") -> dict:
     """The sphere walker's first FHN front on its rest sphere (the insensitive twin's operator: rule 3,
     assembled), started as the walker starts it (its Gaussian of 1.5 mean edges at the vertex nearest
-    -R x̂, w = 0, dt = the walker's). Probes: θ in [π/4, 3π/4] from the origin (the front's
+    -R x̂, w = 0, dt = the walker's), stepped by `scheme` (the walkers' fhn_scheme). Probes: θ in [π/4, 3π/4] from the origin (the front's
     geodesic curvature cot θ / R changes sign at the equator: its slowing D κ, ≤ 1.2%, averages out),
     at distance r̄θ (r̄ the limit points' mean radius), arrival: c's first upward 0.5 crossing of the
     limit values, interpolated between samples every time unit. The run ends when every probe has
@@ -421,9 +422,9 @@ def front_point(device, level, corrections, dtype) -> dict:
         op = LaplaceBeltrami(mesh, rule="3", assembled=True, device=device, dtype=dtype)
         c0, _ = gaussian_pulse(op, origin, width / R, gamma=k["gamma"], radius=R)
         return op, FitzHughNagumo(op, k["gamma"], k["nu"], k["kappa"], k["epsilon"], c0=c0, dt=k["dt"],
-                                  mass_corrections=corrections)  # fmt: skip
+                                  mass_corrections=corrections, scheme=scheme)
 
-    warm_up((id(mesh), "fhn", corrections, dtype), lambda: build()[1].advance(2))
+    warm_up((id(mesh), "fhn", corrections, dtype, scheme), lambda: build()[1].advance(2))
     start = time.perf_counter()
     op, wave = build()
     seconds = time.perf_counter() - start
@@ -444,7 +445,7 @@ def front_point(device, level, corrections, dtype) -> dict:
         previous = now
     fired = ~np.isnan(arrival)
     point = {"level": level, "vertices": mesh.n_vertices, **method_fields("subdivision", corrections, "3"), "dtype": dtype,
-             "dt": wave.dt, "steps": wave.steps, "seconds": seconds, "reference": reference, "mean_edge_R": edge / R,
+             "fhn_scheme": scheme, "dt": wave.dt, "steps": wave.steps, "seconds": seconds, "reference": reference, "mean_edge_R": edge / R,
              "reach_R": float(distance[fired].max() / R) if fired.any() else 0.0, "stalled": not fired[probes].all(),
              "speed": 0.0, "error": 1.0, "deviation": None}  # fmt: skip
     if not point["stalled"]:
@@ -492,4 +493,6 @@ def sweeps(quick) -> dict:
     }  # fmt: skip
     front = {"sphere": [(front_point, (L, p, dtype)) for L in ([3, 5] if quick else [3, 4, 5, 6])
                         for p in ([0] if quick else [0, 2]) for dtype in dtypes]}  # fmt: skip
+    front["sphere"] += [(front_point, (L, p, "float32", "heun")) for L in ([5] if quick else [4, 5, 6])
+                        for p in ([2] if quick else [2, 4])]
     return {"spectrum": {"sphere": spectrum}, "telegraph": telegraph, "radius": radius, "arrival": arrival, "front": front}
