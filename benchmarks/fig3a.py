@@ -301,7 +301,7 @@ def main(argv=None) -> int:
             runs.append({name: record.get(name) for name in RUN_FIELDS})
     result = {"level": args.level, "front_speed_ratio": ratio, "device": f"{device.alias} ({device.name})",
               "date": date.today().isoformat(), "runs": runs,
-              "claims": claims(runs, args.regimes, sorted({*CHECKPOINTS, math.floor(args.periods)}))}
+              "claims": claims(runs, args.regimes, sorted({*CHECKPOINTS, max(1, math.floor(args.periods))}))}
     write_json(os.path.join(args.out, "fig3a.json"), result)
     fig3a_png(runs, args.regimes, args.scenes, os.path.join(args.out, "fig3a.png"), title=f"Fig. 3a, level {args.level}, "
               f"{device.name}, front speed {ratio:.3f} of the continuum's")
