@@ -13,13 +13,15 @@ level; the prism gets the divisions of the same mean edge (`prism_divisions`). A
 periods T₀ and 5 % more, so that t/T reaches `--periods` with the measured T up to 1.05 T₀.
 
 Each run is one JSON in OUT/points (NAME.json, and with `--h5` its trajectory NAME.h5), written by a worker process
-(`--workers`, started costliest first): a re-run skips the finished ones and runs again the failed ones; a run that
-raises or stops is recorded with its error. `--max-seconds`: no run starts after that many seconds (the rest are
-left for a re-run). Writes OUT/fig3a.json — `level`, `front_speed_ratio` (the `front` accuracy case at this level
-and chemistry dt over the continuum front), `device`, `date`, `runs` (per run: `scene`, `regime`, `sensitive`,
-`seed`, `period`, `t_over_T`, `displacement_R` (from t = 0 along the wave, in R), `pulse_displacements_R` (one per
-whole period), and what ran: `time`, `sag_R`, `chemistry_dt`, `mechanics_dt`, `substeps`, `overrides`, `status`,
-`error`), `claims` (benchmarks/fig3a_summary.py) — and OUT/fig3a.png, laid out like the paper's Fig. 3a.
+(`--workers`, started costliest first; `--device cuda` deals them over every GPU of the host in turn): a re-run
+skips the finished ones and runs again the failed ones; a run that raises or stops is recorded with its error.
+`--max-seconds`: no run starts after that many seconds (the rest are left for a re-run).
+
+Writes OUT/fig3a.json — `level`, `front_speed_ratio` (the `front` accuracy case at this level and chemistry dt over
+the continuum front), `device`, `date`, `runs` (per run: `scene`, `regime`, `sensitive`, `seed`, `period`,
+`t_over_T`, `displacement_R` (from t = 0 along the wave, in R), `pulse_displacements_R` (one per whole period), and
+what ran: `time`, `sag_R`, `chemistry_dt`, `mechanics_dt`, `substeps`, `overrides`, `status`, `error`), `claims`
+(benchmarks/fig3a_summary.py) — and OUT/fig3a.png, laid out like the paper's Fig. 3a.
 """
 
 from __future__ import annotations
@@ -235,9 +237,9 @@ def parse(argv):
     return args
 
 
-def run_all(todo: list, args, device: str, folder: str) -> tuple:
-    """Run `todo` [(point, overrides)] on the worker processes, costliest regime first (the smallest drag); returns
-    (done, failed, left) counts."""
+def run_all(todo: list, args, devices: list, folder: str) -> tuple:
+    """Run `todo` [(point, overrides)] on the worker processes, costliest regime first (the smallest drag), the runs
+    dealt over `devices` in turn; returns (done, failed, left) counts."""
     from wavewarp.io import write_json
 
     order = list(REGIMES)
@@ -246,8 +248,8 @@ def run_all(todo: list, args, device: str, folder: str) -> tuple:
     counts = {"done": 0, "failed": 0, "left": 0}
     context = multiprocessing.get_context("spawn")  # Warp's runtime is not fork-safe
     with concurrent.futures.ProcessPoolExecutor(args.workers, mp_context=context) as pool:
-        jobs = {pool.submit(run_point, point, overrides, device, folder, args.h5, deadline): (point, overrides)
-                for point, overrides in todo}
+        jobs = {pool.submit(run_point, point, overrides, devices[k % len(devices)], folder, args.h5, deadline):
+                (point, overrides) for k, (point, overrides) in enumerate(todo)}
         for job in concurrent.futures.as_completed(jobs):
             point, overrides = jobs[job]
             try:
@@ -290,7 +292,10 @@ def main(argv=None) -> int:
             todo.append((point, overrides))
     print(f"fig3a: {len(points)} runs, {skipped} finished before, {len(todo)} to run on {args.workers} worker(s)")
     ratio = front_speed_ratio(device.alias, args.level, args.set)
-    done, failed, left = run_all(todo, args, device.alias, folder)
+    devices = [device.alias]
+    if args.device == "cuda":  # every GPU of the host, the runs dealt in turn
+        devices = [d.alias for d in wp.get_cuda_devices()]
+    done, failed, left = run_all(todo, args, devices, folder)
     print(f"fig3a: {done} done, {failed} failed, {left} left for a re-run (--max-seconds), {skipped} skipped")
     runs = []
     for point in points:
@@ -303,8 +308,8 @@ def main(argv=None) -> int:
               "date": date.today().isoformat(), "runs": runs,
               "claims": claims(runs, args.regimes, sorted({*CHECKPOINTS, max(1, math.floor(args.periods))}))}
     write_json(os.path.join(args.out, "fig3a.json"), result)
-    fig3a_png(runs, args.regimes, args.scenes, os.path.join(args.out, "fig3a.png"), title=f"Fig. 3a, level {args.level}, "
-              f"{device.name}, front speed {ratio:.3f} of the continuum's")
+    title = f"Fig. 3a, level {args.level}, {device.name}, front speed {ratio:.3f} of the continuum's"
+    fig3a_png(runs, args.regimes, args.scenes, os.path.join(args.out, "fig3a.png"), title=title)
     print(f"wrote {os.path.join(args.out, 'fig3a.json')} and fig3a.png")
     return 0
 

@@ -12,7 +12,8 @@ A twin's ensemble is its finished runs (status "done") of one regime and scene; 
   lies below half of it; fails where the sensitive prism's mean + sd is not positive or the insensitive one's
   mean − sd lies above half the sensitive one's mean + sd; undecided between.
 
-Evaluated at CHECKPOINTS and at the bench's --periods. A check point no ensemble reaches (runs shorter than k periods, or no finished run) is "not run".
+Evaluated at CHECKPOINTS and at the bench's --periods. A check point no ensemble reaches (runs shorter than k
+periods, or no finished run) is "not run".
 """
 
 from __future__ import annotations
