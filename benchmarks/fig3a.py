@@ -12,7 +12,8 @@ explicit overdamped step shrinks with ζ by itself, the substeps are recorded). 
 level; the prism gets the divisions of the same mean edge (`prism_divisions`). A run lasts `--periods` kinetic
 periods T₀ and 5 % more, so that t/T reaches `--periods` with the measured T up to 1.05 T₀.
 
-Each run is one JSON in OUT/points (NAME.json, and with `--h5` its trajectory NAME.h5), written by a worker process
+Each run is one JSON in OUT/points (NAME.json, and with `--h5` its trajectory NAME.h5, from whose last frame a run
+killed part-way continues: a run longer than a job's time limit), written by a worker process
 (`--workers`, started costliest first; `--device cuda` deals them over every GPU of the host in turn): a re-run
 skips the finished ones and runs again the failed ones; a run that raises or stops is recorded with its error.
 `--max-seconds`: no run starts after that many seconds (the rest are left for a re-run).
@@ -109,7 +110,7 @@ def walk(point: Point, overrides: list, device: str, h5_path: str | None) -> dic
 
     from wavewarp.driver import simulate
     from wavewarp.parameters import load_scene, resolve
-    from wavewarp.trajectory import TrajectoryWriter
+    from wavewarp.trajectory import TrajectoryWriter, read_frames
 
     wp.config.log_level = wp.LOG_WARNING
     module = load_scene(point.scene)
@@ -120,12 +121,13 @@ def walk(point: Point, overrides: list, device: str, h5_path: str | None) -> dic
         raise ValueError(f"paper-literal {point.scene} sags {100 * sag:.2f}% of R at Y = {p.young:g}, outside "
                          f"{100 * SAG_RANGE[0]:g}–{100 * SAG_RANGE[1]:g}%: choose another Y with "
                          f"--paper-young {point.scene}=Y (softer sags more)")
-    writers = []
+    writers, frames = [], stored_frames(h5_path) if h5_path else 0
     if h5_path:
         writers.append(TrajectoryWriter(h5_path, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices,
                                         series=run.series, scene=module.NAME, parameters=run.resolved,
-                                        device=str(run.shell.device), provenance={"seed": point.seed}))
-    outcome = simulate(run, writers)
+                                        device=str(run.shell.device), provenance={"seed": point.seed},
+                                        resume=frames > 0, resume_frames=frames or None))
+    outcome = simulate(run, writers, replay=read_frames(h5_path)[:frames] if frames else ())
     if outcome.interrupted:
         raise KeyboardInterrupt
     if outcome.failure:
@@ -140,7 +142,21 @@ def walk(point: Point, overrides: list, device: str, h5_path: str | None) -> dic
             "sag_R": sag, "chemistry_dt": run.wave.dt, "mechanics_dt": run.resolved["mechanics_dt"],
             "substeps": run.resolved["substeps"], "mechanics_steps": measured["mechanics_steps"],
             "rolling_angle_deg": measured["rolling_angle_deg"], "lateral_R": measured["lateral_R"],
-            "device": str(run.shell.device), "parameters": run.resolved}
+            "device": str(run.shell.device), "resumed_after_frames": frames, "parameters": run.resolved}
+
+
+def stored_frames(path: str) -> int:
+    """The whole frames of a killed run's trajectory at `path` to continue from (0: none, or another version's)."""
+    import h5py
+
+    from wavewarp import __version__
+    from wavewarp.trajectory import complete_frames
+
+    try:
+        with h5py.File(path, "r") as f:
+            return complete_frames(f) if f.attrs.get("wavewarp_version") == __version__ else 0
+    except (OSError, KeyError, ValueError):
+        return 0
 
 
 def run_point(point: Point, overrides: list, device: str, folder: str, h5: bool, deadline: float | None) -> dict:

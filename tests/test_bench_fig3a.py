@@ -125,3 +125,24 @@ def test_paper_footing_on_a_made_up_trace():
     np.testing.assert_allclose(footing["displacement_R"], [0.0, 0.8, 1.25, 3.2, 5.0], atol=0.02)
     np.testing.assert_allclose(footing["pulse_displacements_R"], [0.8, 2.4], atol=0.02)
     assert fig3a.prism_divisions(4) == 34 and fig3a.prism_divisions(2) == 8
+
+
+def test_a_run_killed_part_way_continues_from_its_trajectory(bench, tmp_path):
+    from wavewarp.trajectory import COMPLETE
+
+    out, _, _ = bench
+    sensitive, insensitive = (f"default_sphere-walker_{twin}_seed0" for twin in ("sensitive", "insensitive"))
+    os.makedirs(tmp_path / "points")
+    for name in (f"{sensitive}.h5", f"{insensitive}.json"):
+        with open(out / "points" / name, "rb") as source, open(tmp_path / "points" / name, "wb") as target:
+            target.write(source.read())
+    with h5py.File(tmp_path / "points" / f"{sensitive}.h5", "r+") as f:
+        f["frames"].attrs[COMPLETE] = 2  # killed after its second frame
+    assert fig3a.main([*ARGS[:5], "--regimes", "default", "--seeds", "1", *ARGS[8:], "--out", str(tmp_path)]) == 0
+    with open(tmp_path / "points" / f"{sensitive}.json") as f:
+        resumed = json.load(f)
+    with open(out / "points" / f"{sensitive}.json") as f:
+        whole = json.load(f)
+    assert resumed["status"] == "done" and resumed["resumed_after_frames"] == 2
+    assert resumed["period"] == whole["period"]
+    np.testing.assert_allclose(resumed["displacement_R"], whole["displacement_R"], rtol=0, atol=1e-12)
