@@ -401,11 +401,12 @@ def front_references() -> dict:
     return {**reference, "without_w": front_reference(0.0)["speed"], "time_step_share": at(k["dt"]) / at(finest) - 1}
 
 
-def front_point(device, level, corrections, dtype, scheme="explicit") -> dict:
+def front_point(device, level, corrections, dtype, scheme="explicit", dt=None) -> dict:
     """The sphere walker's first FHN front on its rest sphere (the insensitive twin's operator: rule 3,
     assembled), started as the walker starts it (its Gaussian of 1.5 mean edges at the vertex nearest
-    -R x̂, w = 0, dt = the walker's), stepped by `scheme` (the walkers' fhn_scheme). Probes: θ in [π/4, 3π/4] from the origin (the front's
-    geodesic curvature cot θ / R changes sign at the equator: its slowing D κ, ≤ 1.2%, averages out),
+    -R x̂, w = 0, dt = the walker's, or `dt`), stepped by `scheme` (the walkers' fhn_scheme). Probes: θ in
+    [π/4, 3π/4] from the origin (the front's geodesic curvature cot θ / R changes sign at the equator: its
+    slowing D κ, ≤ 1.2%, averages out),
     at distance r̄θ (r̄ the limit points' mean radius), arrival: c's first upward 0.5 crossing of the
     limit values, interpolated between samples every time unit. The run ends when every probe has
     fired, or at t = 2 s_max / v_ref: a front that has not crossed the window by then is slower than
@@ -421,7 +422,7 @@ def front_point(device, level, corrections, dtype, scheme="explicit") -> dict:
     def build():
         op = LaplaceBeltrami(mesh, rule="3", assembled=True, device=device, dtype=dtype)
         c0, _ = gaussian_pulse(op, origin, width / R, gamma=k["gamma"], radius=R)
-        return op, FitzHughNagumo(op, k["gamma"], k["nu"], k["kappa"], k["epsilon"], c0=c0, dt=k["dt"],
+        return op, FitzHughNagumo(op, k["gamma"], k["nu"], k["kappa"], k["epsilon"], c0=c0, dt=dt or k["dt"],
                                   mass_corrections=corrections, scheme=scheme)
 
     warm_up((id(mesh), "fhn", corrections, dtype, scheme), lambda: build()[1].advance(2))
