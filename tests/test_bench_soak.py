@@ -3,6 +3,8 @@ float32 round-off and the memory is sampled (the 10⁵-step soak on a GPU is BEN
 
 import json
 
+import pytest
+
 from wavewarp.cli import main as cli
 
 
@@ -19,3 +21,31 @@ def test_a_short_soak_writes_its_samples_and_chart(tmp_path):
     assert result["summary"]["invariant_error_max"] < 1e-5
     assert all(s["host_rss_bytes"] > 0 and s["volume"] > 0 for s in samples)
     assert result["machine"]["device"] == "cpu" and result["parameters"]["level"] == 2
+
+
+def test_a_resumed_soak_continues_the_same_run_and_refuses_another(tmp_path, capsys):
+    """A soak cut at 20 steps and resumed to 40 in a new call has the uninterrupted soak's samples (the walker resumes
+    bit for bit on the CPU), its second process marked; an existing soak is neither replaced nor continued unasked,
+    and one run with other parameters is not continued."""
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    options = ["bench", "soak", "--device", "cpu", "--quick", "--every", "10"]
+    assert cli([*options, "--steps", "40", "--out", str(whole)]) == 0
+    assert cli([*options, "--steps", "20", "--out", str(parts)]) == 0
+    with pytest.raises(SystemExit):  # exists: neither --resume nor --overwrite
+        cli([*options, "--steps", "40", "--out", str(parts)])
+    assert "soak_cpu_quick.json exists: --resume continues it" in capsys.readouterr().err
+    assert cli([*options, "--steps", "40", "--out", str(parts), "--resume", "--set", "AC=0.3"]) == 2
+    assert "ran other parameters (AC)" in capsys.readouterr().err
+    assert cli([*options, "--steps", "40", "--out", str(parts), "--resume"]) == 0
+    uninterrupted = json.loads((whole / "soak_cpu_quick.json").read_text())["samples"]
+    resumed = json.loads((parts / "soak_cpu_quick.json").read_text())
+    cut = max(s["step"] for s in resumed["samples"] if s.get("segment", 0) == 0)  # the first call's last frame
+    steps = {s["step"] for s in uninterrupted}
+    assert resumed["finished"] and {s["step"] for s in resumed["samples"]} == steps | {cut} and cut >= 20
+    at = {s["step"]: s for s in resumed["samples"]}
+    for b in uninterrupted:
+        a = at[b["step"]]
+        assert (a["invariant_error"], a["volume"], a["time"]) == (b["invariant_error"], b["volume"], b["time"])
+    assert {s.get("segment", 0) for s in resumed["samples"] if s["step"] > cut} == {1}
+    assert cli([*options, "--steps", "40", "--out", str(parts), "--resume"]) == 2
+    assert "finished its 42 steps; ask for more --steps" in capsys.readouterr().err
