@@ -1,8 +1,8 @@
 """Fig. 3a on the paper's footing (issue 58): each walker's displacement from t = 0 against t/T, its own period T.
 
-    wavewarp bench fig3a [--device D] [--seeds 8] [--level L] [--regimes ...] [--periods 12] [--workers N]
-                         [--out benchmarks/results/fig3a] [--quick] [--max-seconds S] [--scenes ...] [--h5]
-                         [--set NAME=VALUE ...] [--paper-young SCENE=Y ...]
+    wavewarp bench fig3a [--device D] [--seeds 8] [--batch N] [--level L] [--regimes ...] [--periods 12]
+                         [--workers N] [--out benchmarks/results/fig3a] [--quick] [--max-seconds S] [--scenes ...]
+                         [--h5] [--set NAME=VALUE ...] [--paper-young SCENE=Y ...]
 
 Runs the sensitive and insensitive sphere and prism walkers, `--seeds` rest shapes each (noise 1e-3 R, seeded), in
 each regime of REGIMES: `default` (the scenes' defaults), `paper-literal` (inertia, the explicit tanh contact with
@@ -12,11 +12,18 @@ explicit overdamped step shrinks with ζ by itself, the substeps are recorded). 
 level; the prism gets the divisions of the same mean edge (`prism_divisions`). A run lasts `--periods` kinetic
 periods T₀ and 5 % more, so that t/T reaches `--periods` with the measured T up to 1.05 T₀.
 
-Each run is one JSON in OUT/points (NAME.json, and with `--h5` its trajectory NAME.h5, from whose last frame a run
-killed part-way continues: a run longer than a job's time limit), written by a worker process
-(`--workers`, started costliest first; `--device cuda` deals them over every GPU of the host in turn): a re-run
-skips the finished ones and runs again the failed ones; a run that raises or stops is recorded with its error.
-`--max-seconds`: no run starts after that many seconds (the rest are left for a re-run).
+A job is one twin in one regime with its seeds — all of `--seeds`, or chunks of `--batch N` — stepped together as
+one batched run (wavewarp/batch.py: a GPU run is launch-bound, so a batch costs little more than one run); the
+seeds share the strictest seed's mechanics steps, so a seed's walk equals its single run settled with those steps
+(`settle_dt`). A job of one seed is a single run as before. Each seed is one JSON in OUT/points (NAME.json, with
+`batch_seeds`, the job's), written by a worker process (`--workers`, costliest jobs first; `--device cuda` deals
+them over every GPU of the host in turn): a re-run skips a job whose seeds are all done and runs again, whole, a job
+with a failed or missing seed. A seed that raises or stops is recorded with its error; in a batch the others keep
+their results, and a paper-literal seed refused for its sag still steps with the others (they share the settling's
+steps), but a batch whose every seed is refused does not run. `--h5` writes each run's trajectory NAME.h5, from
+whose last frame a run killed part-way continues (a run longer than a job's time limit): a single-run feature, so
+`--h5` runs each seed alone (`--batch 1`). `--max-seconds`: no job starts after that many seconds (the rest are
+left for a re-run).
 
 Writes OUT/fig3a.json — `level`, `front_speed_ratio` (the `front` accuracy case at this level and chemistry dt over
 the continuum front), `device`, `date`, `runs` (per run: `scene`, `regime`, `sensitive`, `seed`, `period`,

@@ -1,6 +1,7 @@
 """`wavewarp bench fig3a` at quick settings on the CPU (the sphere twins, 2 seeds, level 2, 2 periods): the JSON's
 schema, t/T on each twin's own period, the displacement from t = 0 against the trajectories' own centre of mass, the
-pulses' sum, a refused paper-literal shell recorded as a failure, and a re-run that skips the finished runs."""
+pulses' sum, a refused paper-literal shell recorded as a failure, and a re-run that skips the finished runs (each seed
+alone: --h5); a batched job's seeds against their single runs, and its refused worlds."""
 
 import json
 import os
