@@ -1,8 +1,8 @@
 """Fig. 3a on the paper's footing (issue 58): each walker's displacement from t = 0 against t/T, its own period T.
 
-    wavewarp bench fig3a [--device D] [--seeds 8] [--level L] [--regimes ...] [--periods 12] [--workers N]
-                         [--out benchmarks/results/fig3a] [--quick] [--max-seconds S] [--scenes ...] [--h5]
-                         [--set NAME=VALUE ...] [--paper-young SCENE=Y ...]
+    wavewarp bench fig3a [--device D] [--seeds 8] [--batch N] [--level L] [--regimes ...] [--periods 12]
+                         [--workers N] [--out benchmarks/results/fig3a] [--quick] [--max-seconds S] [--scenes ...]
+                         [--h5] [--set NAME=VALUE ...] [--paper-young SCENE=Y ...]
 
 Runs the sensitive and insensitive sphere and prism walkers, `--seeds` rest shapes each (noise 1e-3 R, seeded), in
 each regime of REGIMES: `default` (the scenes' defaults), `paper-literal` (inertia, the explicit tanh contact with
@@ -12,11 +12,18 @@ explicit overdamped step shrinks with ζ by itself, the substeps are recorded). 
 level; the prism gets the divisions of the same mean edge (`prism_divisions`). A run lasts `--periods` kinetic
 periods T₀ and 5 % more, so that t/T reaches `--periods` with the measured T up to 1.05 T₀.
 
-Each run is one JSON in OUT/points (NAME.json, and with `--h5` its trajectory NAME.h5, from whose last frame a run
-killed part-way continues: a run longer than a job's time limit), written by a worker process
-(`--workers`, started costliest first; `--device cuda` deals them over every GPU of the host in turn): a re-run
-skips the finished ones and runs again the failed ones; a run that raises or stops is recorded with its error.
-`--max-seconds`: no run starts after that many seconds (the rest are left for a re-run).
+A job is one twin in one regime with its seeds — all of `--seeds`, or chunks of `--batch N` — stepped together as
+one batched run (wavewarp/batch.py: a GPU run is launch-bound, so a batch costs little more than one run); the
+seeds share the strictest seed's mechanics steps, so a seed's walk equals its single run settled with those steps
+(`settle_dt`). A job of one seed is a single run as before. Each seed is one JSON in OUT/points (NAME.json, with
+`batch_seeds`, the job's), written by a worker process (`--workers`, costliest jobs first; `--device cuda` deals
+them over every GPU of the host in turn): a re-run skips a job whose seeds are all done and runs again, whole, a job
+with a failed or missing seed. A seed that raises or stops is recorded with its error; in a batch the others keep
+their results, and a paper-literal seed refused for its sag still steps with the others (they share the settling's
+steps), but a batch whose every seed is refused does not run. `--h5` writes each run's trajectory NAME.h5, from
+whose last frame a run killed part-way continues (a run longer than a job's time limit): a single-run feature, so
+`--h5` runs each seed alone (`--batch 1`). `--max-seconds`: no job starts after that many seconds (the rest are
+left for a re-run).
 
 Writes OUT/fig3a.json — `level`, `front_speed_ratio` (the `front` accuracy case at this level and chemistry dt over
 the continuum front), `device`, `date`, `runs` (per run: `scene`, `regime`, `sensitive`, `seed`, `period`,
@@ -85,6 +92,20 @@ class Point:
                 *extra, f"sensitive={str(self.sensitive).lower()}"]
 
 
+@dataclass(frozen=True)
+class Job:
+    """A worker's job: seeds of a walker twin in a regime, run as one batch (one seed: a single run)."""
+
+    scene: str
+    regime: str
+    sensitive: bool
+    seeds: tuple
+
+    @property
+    def points(self) -> list:
+        return [Point(self.scene, self.regime, self.sensitive, seed) for seed in self.seeds]
+
+
 def paper_footing(trace: np.ndarray, forward, radius: float, period: float, frame_times) -> dict:
     """From a walker's trace (rows: t, c at the origin, centre of mass, ...): the centre of mass's displacement from
     t = 0 along `forward`, in R, sampled at every whole t/T and at `frame_times`; and per whole period its change
@@ -98,10 +119,33 @@ def paper_footing(trace: np.ndarray, forward, radius: float, period: float, fram
             "pulse_displacements_R": np.diff(np.interp(whole, t, along)).tolist()}
 
 
-def settled_sag(run) -> float:
-    """How far the settled centre of mass lies below the rigid shell's in the same contact, in R (the scenes' sag_R)."""
-    x = run.dynamics.positions()
-    return float((run.rest_height - run.dynamics.mass @ x[:, 2] / run.dynamics.total_mass) / run.radius)
+def settled_sag(x, mass, total_mass: float, rest_height: float, radius: float) -> float:
+    """How far the settled centre of mass (positions `x`, vertex masses `mass`) lies below the rigid shell's in the
+    same contact, in R (the scenes' sag_R)."""
+    return float((rest_height - mass @ x[:, 2] / total_mass) / radius)
+
+
+def sag_refusal(scene: str, regime: str, sag: float, young: float) -> ValueError | None:
+    """The error that refuses a paper-literal shell whose settled sag lies outside SAG_RANGE; None where it passes."""
+    if regime != "paper-literal" or SAG_RANGE[0] <= sag <= SAG_RANGE[1]:
+        return None
+    return ValueError(f"paper-literal {scene} sags {100 * sag:.2f}% of R at Y = {young:g}, outside "
+                      f"{100 * SAG_RANGE[0]:g}–{100 * SAG_RANGE[1]:g}%: choose another Y with "
+                      f"--paper-young {scene}=Y (softer sags more)")
+
+
+def walked(run, measured: dict, trace, forward, sag: float, resolved: dict) -> dict:
+    """A finished run's record (`run` a WalkerRun, or the batch of the world whose `measured`, `trace`, `forward`,
+    `resolved` these are): its period, its displacement on the paper's footing and how it ran."""
+    if measured["period"] is None:
+        raise ValueError(f"c at the origin crossed ½ upwards fewer than twice by t = {measured['time']:.4g}: no "
+                         "period T; run more periods")
+    times = np.arange(run.frames + 1) * run.steps_per_frame * run.wave.dt
+    return {"period": measured["period"], **paper_footing(trace, forward, run.radius, measured["period"], times),
+            "sag_R": sag, "chemistry_dt": run.wave.dt, "mechanics_dt": resolved["mechanics_dt"],
+            "substeps": resolved["substeps"], "mechanics_steps": measured["mechanics_steps"],
+            "rolling_angle_deg": measured["rolling_angle_deg"], "lateral_R": measured["lateral_R"],
+            "device": str(run.shell.device)}
 
 
 def walk(point: Point, overrides: list, device: str, h5_path: str | None) -> dict:
@@ -116,11 +160,11 @@ def walk(point: Point, overrides: list, device: str, h5_path: str | None) -> dic
     module = load_scene(point.scene)
     p = resolve(module.Parameters, None, overrides)
     run = module.build(p, device=device, seed=point.seed, report=lambda message: None)
-    sag = settled_sag(run)
-    if point.regime == "paper-literal" and not SAG_RANGE[0] <= sag <= SAG_RANGE[1]:
-        raise ValueError(f"paper-literal {point.scene} sags {100 * sag:.2f}% of R at Y = {p.young:g}, outside "
-                         f"{100 * SAG_RANGE[0]:g}–{100 * SAG_RANGE[1]:g}%: choose another Y with "
-                         f"--paper-young {point.scene}=Y (softer sags more)")
+    dynamics = run.dynamics
+    sag = settled_sag(dynamics.positions(), dynamics.mass, dynamics.total_mass, run.rest_height, run.radius)
+    refusal = sag_refusal(point.scene, point.regime, sag, p.young)
+    if refusal:
+        raise refusal
     writers, frames = [], stored_frames(h5_path) if h5_path else 0
     if h5_path:
         writers.append(TrajectoryWriter(h5_path, triangles=run.mesh.triangles, rest_positions=run.mesh.vertices,
@@ -132,17 +176,44 @@ def walk(point: Point, overrides: list, device: str, h5_path: str | None) -> dic
         raise KeyboardInterrupt
     if outcome.failure:
         raise RuntimeError(f"the run stopped at t = {run.time:.4g}: {outcome.failure}")
-    measured = outcome.measurements
-    if measured["period"] is None:
-        raise ValueError(f"c at the origin crossed ½ upwards fewer than twice by t = {run.time:.4g}: no period T; "
-                         "run more periods")
-    frame_times = np.arange(run.frames + 1) * run.steps_per_frame * run.wave.dt
-    return {"period": measured["period"],
-            **paper_footing(run.trace, run.forward, run.radius, measured["period"], frame_times),
-            "sag_R": sag, "chemistry_dt": run.wave.dt, "mechanics_dt": run.resolved["mechanics_dt"],
-            "substeps": run.resolved["substeps"], "mechanics_steps": measured["mechanics_steps"],
-            "rolling_angle_deg": measured["rolling_angle_deg"], "lateral_R": measured["lateral_R"],
-            "device": str(run.shell.device), "resumed_after_frames": frames, "parameters": run.resolved}
+    return {**walked(run, outcome.measurements, run.trace, run.forward, sag, run.resolved),
+            "settle_dt": run.settle_dt, "batch_seeds": [point.seed], "resumed_after_frames": frames,
+            "parameters": run.resolved}
+
+
+def walk_batch(job: Job, overrides: list, device: str) -> list:
+    """Build and run the job's seeds as one batch (wavewarp/batch.py): per seed, its record as `walk`'s or the
+    error that failed it. A paper-literal world whose sag is out of range is refused and the others go on (it still
+    steps with them: the worlds share the settling's steps, so dropping it would change theirs); where every
+    world's is, the batch does not run. A world that stops or gives no period fails alone."""
+    import warp as wp
+
+    from wavewarp.parameters import load_scene, resolve
+
+    wp.config.log_level = wp.LOG_WARNING
+    module = load_scene(job.scene)
+    p = resolve(module.Parameters, None, overrides)
+    batch = module.build_batch([p] * len(job.seeds), seeds=job.seeds, device=device, report=lambda message: None)
+    x, mass, n = batch.dynamics.positions(), batch.dynamics.mass, batch.vertices
+    sags = [settled_sag(x[w * n:(w + 1) * n], mass[w * n:(w + 1) * n], batch.dynamics.world_masses[w],
+                        batch.rest_heights[w], batch.radius) for w in range(batch.worlds)]
+    outcomes = [sag_refusal(job.scene, job.regime, sag, p.young) for sag in sags]
+    if all(outcomes):
+        return outcomes
+    results = batch.run()
+    for w, result in enumerate(results):
+        if outcomes[w] is not None:
+            continue
+        try:  # this world's failure is its own: the others keep their results
+            if result["status"] == "stopped":
+                raise RuntimeError(f"the run stopped at t = {result['measurements']['time']:.4g}: {result['stopped']}")
+            outcomes[w] = {**walked(batch, result["measurements"], batch.traces[w], batch.placed[w].forward, sags[w],
+                                    batch.resolved[w]),
+                           "settle_dt": batch.settle_dt, "batch_seeds": list(job.seeds), "resumed_after_frames": 0,
+                           "parameters": batch.resolved[w]}
+        except (RuntimeError, ValueError) as error:
+            outcomes[w] = error
+    return outcomes
 
 
 def stored_frames(path: str) -> int:
@@ -159,23 +230,49 @@ def stored_frames(path: str) -> int:
         return 0
 
 
-def run_point(point: Point, overrides: list, device: str, folder: str, h5: bool, deadline: float | None) -> dict:
-    """A worker's job: one run, its result written to FOLDER/NAME.json (a failure too, with its error); None when
-    `deadline` (a time.time()) has passed before it started."""
+def write_record(folder: str, point: Point, overrides: list, outcome, wall_time: float) -> dict:
+    """The point's record written to FOLDER/NAME.json: its result, or an error (`outcome` an exception) as failed."""
     from wavewarp.io import write_json
 
-    if deadline is not None and time.time() > deadline:
-        return None
     record = {"scene": point.scene, "regime": point.regime, "sensitive": point.sensitive, "seed": point.seed,
               "overrides": overrides, "status": "done", "error": None}
-    start = time.perf_counter()
-    try:
-        record.update(walk(point, overrides, device, os.path.join(folder, point.name + ".h5") if h5 else None))
-    except Exception as error:  # a failed run is a result: recorded, and run again by a re-run
-        record.update(status="failed", error=f"{type(error).__name__}: {error}")
-    record["wall_time_s"] = time.perf_counter() - start
+    if isinstance(outcome, Exception):
+        record.update(status="failed", error=f"{type(outcome).__name__}: {outcome}")
+    else:
+        record.update(outcome)
+    record["wall_time_s"] = wall_time
     write_json(os.path.join(folder, point.name + ".json"), record)
     return record
+
+
+def run_point(point: Point, overrides: list, device: str, folder: str, h5: bool, deadline: float | None) -> dict:
+    """One run, its result written to FOLDER/NAME.json (a failure too, with its error); None when `deadline` (a
+    time.time()) has passed before it started."""
+    if deadline is not None and time.time() > deadline:
+        return None
+    start = time.perf_counter()
+    try:
+        outcome = walk(point, overrides, device, os.path.join(folder, point.name + ".h5") if h5 else None)
+    except Exception as error:  # a failed run is a result: recorded, and run again by a re-run
+        outcome = error
+    return write_record(folder, point, overrides, outcome, time.perf_counter() - start)
+
+
+def run_job(job: Job, overrides: list, device: str, folder: str, h5: bool, deadline: float | None) -> list | None:
+    """A worker's job: its seeds as one batched run (one seed: a single run, `run_point`), each seed's record written
+    to FOLDER/NAME.json (`wall_time_s` the whole job's); None when `deadline` has passed before it started."""
+    if len(job.seeds) == 1:
+        record = run_point(job.points[0], overrides, device, folder, h5, deadline)
+        return None if record is None else [record]
+    if deadline is not None and time.time() > deadline:
+        return None
+    start = time.perf_counter()
+    try:
+        outcomes = walk_batch(job, overrides, device)
+    except Exception as error:  # the batch failed as a whole (building, settling): every seed's result
+        outcomes = [error] * len(job.seeds)
+    wall_time = time.perf_counter() - start
+    return [write_record(folder, point, overrides, outcome, wall_time) for point, outcome in zip(job.points, outcomes)]
 
 
 def stored(folder: str, point: Point, overrides: list) -> dict | None:
@@ -232,12 +329,16 @@ def parse(argv):
     parser.add_argument("--out", default=os.path.join("benchmarks", "results", "fig3a"), help="output folder")
     parser.add_argument("--quick", action="store_true", help="level 2, 2 periods, 2 seeds, 4 frames (a CPU smoke run)")
     parser.add_argument("--max-seconds", type=float, default=None, help="start no run after this many seconds")
-    parser.add_argument("--h5", action="store_true", help="write each run's trajectory as OUT/points/NAME.h5")
+    parser.add_argument("--batch", type=int, default=None,
+                        help="seeds of a twin stepped together in one batched run (default: all --seeds; 1: each "
+                             "seed its own run)")
+    parser.add_argument("--h5", action="store_true",
+                        help="write each run's trajectory as OUT/points/NAME.h5 (each seed its own run: --batch 1)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override for every run")
     parser.add_argument("--paper-young", action="append", default=[], metavar="SCENE=Y",
                         help=f"paper-literal Young's modulus (default {PAPER_YOUNG})")
     args = parser.parse_args(argv)
-    for name in ("seeds", "level", "workers"):
+    for name in ("seeds", "level", "workers", "batch"):
         if getattr(args, name) is not None and getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1, got {getattr(args, name)}")
     if args.periods is not None and args.periods <= 0:
@@ -249,39 +350,46 @@ def parse(argv):
     args.seeds = args.seeds or (2 if args.quick else 8)
     args.level = args.level or (2 if args.quick else 4)
     args.periods = args.periods or (2.0 if args.quick else 12.0)
+    if args.h5 and (args.batch or 1) > 1:
+        parser.error(f"--h5 continues a killed run from its own trajectory, so each seed runs alone: give --batch 1 "
+                     f"or leave --batch out, not --batch {args.batch}")
+    args.batch = 1 if args.h5 else min(args.batch or args.seeds, args.seeds)
     args.set = (QUICK if args.quick else []) + args.set
     return args
 
 
 def run_all(todo: list, args, devices: list, folder: str) -> tuple:
-    """Run `todo` [(point, overrides)] on the worker processes, costliest regime first (the smallest drag), the runs
-    dealt over `devices` in turn; returns (done, failed, left) counts."""
+    """Run `todo` [(job, overrides)] on the worker processes, costliest regime first (the smallest drag), the jobs
+    dealt over `devices` in turn; returns (done, failed, left) counts of runs."""
     from wavewarp.io import write_json
 
     order = list(REGIMES)
-    todo = sorted(todo, key=lambda job: (-order.index(job[0].regime), job[0].scene != "prism-walker"))
+    todo = sorted(todo, key=lambda item: (-order.index(item[0].regime), item[0].scene != "prism-walker"))
     deadline = None if args.max_seconds is None else time.time() + args.max_seconds
     counts = {"done": 0, "failed": 0, "left": 0}
     context = multiprocessing.get_context("spawn")  # Warp's runtime is not fork-safe
     with concurrent.futures.ProcessPoolExecutor(args.workers, mp_context=context) as pool:
-        jobs = {pool.submit(run_point, point, overrides, devices[k % len(devices)], folder, args.h5, deadline):
-                (point, overrides) for k, (point, overrides) in enumerate(todo)}
-        for job in concurrent.futures.as_completed(jobs):
-            point, overrides = jobs[job]
+        futures = {pool.submit(run_job, job, overrides, devices[k % len(devices)], folder, args.h5, deadline):
+                   (job, overrides) for k, (job, overrides) in enumerate(todo)}
+        for future in concurrent.futures.as_completed(futures):
+            job, overrides = futures[future]
             try:
-                record = job.result()
+                records = future.result()
             except Exception as error:  # the worker died (a crash, a kill): recorded, run again by a re-run
-                record = {"scene": point.scene, "regime": point.regime, "sensitive": point.sensitive,
-                          "seed": point.seed, "overrides": overrides, "status": "failed",
-                          "error": f"the worker process failed: {type(error).__name__}: {error}"}
-                write_json(os.path.join(folder, point.name + ".json"), record)
-            if record is None:
-                counts["left"] += 1
+                records = []
+                for point in job.points:
+                    records.append({"scene": point.scene, "regime": point.regime, "sensitive": point.sensitive,
+                                    "seed": point.seed, "overrides": overrides, "status": "failed",
+                                    "error": f"the worker process failed: {type(error).__name__}: {error}"})
+                    write_json(os.path.join(folder, point.name + ".json"), records[-1])
+            if records is None:
+                counts["left"] += len(job.seeds)
                 continue
-            counts[record["status"]] += 1
-            shown = (f"T = {record['period']:.2f}, {record['t_over_T'][-1]:.2f} T: "
-                     f"{record['displacement_R'][-1]:+.3e} R" if record["status"] == "done" else record["error"])
-            print(f"{point.name}: {record['status']} ({record.get('wall_time_s', 0):.1f} s) {shown}", flush=True)
+            for point, record in zip(job.points, records):
+                counts[record["status"]] += 1
+                shown = (f"T = {record['period']:.2f}, {record['t_over_T'][-1]:.2f} T: "
+                         f"{record['displacement_R'][-1]:+.3e} R" if record["status"] == "done" else record["error"])
+                print(f"{point.name}: {record['status']} ({record.get('wall_time_s', 0):.1f} s) {shown}", flush=True)
     return counts["done"], counts["failed"], counts["left"]
 
 
@@ -296,20 +404,23 @@ def main(argv=None) -> int:
     device = resolve_device(args.device)
     folder = os.path.join(args.out, "points")
     os.makedirs(folder, exist_ok=True)
-    points = [Point(scene, regime, sensitive, seed) for regime in args.regimes for scene in args.scenes
-              for sensitive in (True, False) for seed in range(args.seeds)]
+    jobs = [Job(scene, regime, sensitive, tuple(range(first, min(first + args.batch, args.seeds))))
+            for regime in args.regimes for scene in args.scenes for sensitive in (True, False)
+            for first in range(0, args.seeds, args.batch)]
+    points = [point for job in jobs for point in job.points]
     todo, skipped = [], 0
-    for point in points:
-        overrides = point.overrides(args.level, args.periods, args.set, args.paper_young)
-        record = stored(folder, point, overrides)
-        if record is not None and record["status"] == "done":
-            skipped += 1
-        else:
-            todo.append((point, overrides))
-    print(f"fig3a: {len(points)} runs, {skipped} finished before, {len(todo)} to run on {args.workers} worker(s)")
+    for job in jobs:
+        overrides = job.points[0].overrides(args.level, args.periods, args.set, args.paper_young)
+        records = [stored(folder, point, overrides) for point in job.points]
+        if all(record is not None and record["status"] == "done" for record in records):
+            skipped += len(job.seeds)
+        else:  # a seed failed or missing: the whole job again
+            todo.append((job, overrides))
+    print(f"fig3a: {len(points)} runs, {skipped} finished before, {len(points) - skipped} to run in {len(todo)} "
+          f"job(s) of up to {args.batch} seed(s) on {args.workers} worker(s)")
     ratio = front_speed_ratio(device.alias, args.level, args.set)
     devices = [device.alias]
-    if args.device == "cuda":  # every GPU of the host, the runs dealt in turn
+    if args.device == "cuda":  # every GPU of the host, the jobs dealt in turn
         devices = [d.alias for d in wp.get_cuda_devices()]
     done, failed, left = run_all(todo, args, devices, folder)
     print(f"fig3a: {done} done, {failed} failed, {left} left for a re-run (--max-seconds), {skipped} skipped")

@@ -1,6 +1,7 @@
 """`wavewarp bench fig3a` at quick settings on the CPU (the sphere twins, 2 seeds, level 2, 2 periods): the JSON's
 schema, t/T on each twin's own period, the displacement from t = 0 against the trajectories' own centre of mass, the
-pulses' sum, a refused paper-literal shell recorded as a failure, and a re-run that skips the finished runs."""
+pulses' sum, a refused paper-literal shell recorded as a failure, and a re-run that skips the finished runs (each seed
+alone: --h5); a batched job's seeds against their single runs, and its refused worlds."""
 
 import json
 import os
@@ -146,3 +147,64 @@ def test_a_run_killed_part_way_continues_from_its_trajectory(bench, tmp_path):
     assert resumed["status"] == "done" and resumed["resumed_after_frames"] == 2
     assert resumed["period"] == whole["period"]
     np.testing.assert_allclose(resumed["displacement_R"], whole["displacement_R"], rtol=0, atol=1e-12)
+
+
+def test_a_batched_job_gives_each_seed_its_own_run(tmp_path, monkeypatch):
+    """One twin's three seeds as one batched job (float64), the third world refused by its sag check (stubbed): it is
+    recorded failed with its error, and each of the others' JSON holds the displacement series, period and sag of
+    that seed run alone (a WalkerRun settled with the batch's steps, which the worlds share), bit for bit (batch.py:
+    every reduction per world, in a fixed order on the CPU)."""
+    from wavewarp.driver import simulate
+    from wavewarp.parameters import load_scene, resolve
+    from wavewarp.runs import imperfect
+    from wavewarp.walker import WalkerRun
+
+    worlds = iter(range(3))
+    monkeypatch.setattr(fig3a, "sag_refusal", lambda *args: ValueError("refused") if next(worlds) == 2 else None)
+    job = fig3a.Job("sphere-walker", "default", True, (0, 1, 2))
+    overrides = job.points[0].overrides(2, 2.0, [*fig3a.QUICK, "settle=10", "dtype=float64"])
+    fig3a.run_job(job, overrides, "cpu", str(tmp_path), False, None)
+    records = []
+    for point in job.points:
+        with open(tmp_path / f"{point.name}.json") as f:
+            records.append(json.load(f))
+    assert records[2]["status"] == "failed" and records[2]["error"] == "ValueError: refused"
+    assert "period" not in records[2]
+    module = load_scene(job.scene)
+    p = resolve(module.Parameters, None, overrides)
+    mesh, options = module.recipe(p, device="cpu", report=lambda message: None)
+    for point, batched in zip(job.points[:2], records):
+        assert batched["status"] == "done" and batched["batch_seeds"] == [0, 1, 2]
+        run = WalkerRun(module.NAME, imperfect(mesh, p.noise * options["radius"], point.seed), p, device="cpu",
+                        mechanics_dt=tuple(batched["settle_dt"]), report=lambda message: None, **options)
+        dynamics = run.dynamics
+        sag = fig3a.settled_sag(dynamics.positions(), dynamics.mass, dynamics.total_mass, run.rest_height, run.radius)
+        outcome = simulate(run, [])
+        alone = fig3a.walked(run, outcome.measurements, run.trace, run.forward, sag, run.resolved)
+        for name in ("period", "time", "t_over_T", "displacement_R", "pulse_displacements_R", "sag_R", "mechanics_dt",
+                     "substeps", "mechanics_steps"):
+            assert batched[name] == alone[name], name
+    assert records[0]["displacement_R"] != records[1]["displacement_R"]  # the seeds' walks differ
+
+
+def test_a_batch_whose_every_shell_is_refused_does_not_run(tmp_path, monkeypatch):
+    """Paper-literal shells too stiff to sag 1 %: every seed of the batched job recorded failed with the sag check's
+    error, the batch never stepped."""
+    from wavewarp.batch import WalkerBatch
+
+    def never(*args, **kwargs):
+        raise AssertionError("the refused batch ran")
+
+    monkeypatch.setattr(WalkerBatch, "run", never)
+    job = fig3a.Job("sphere-walker", "paper-literal", False, (0, 1))
+    overrides = job.points[0].overrides(2, 2.0, [*fig3a.QUICK, "settle=10"], {"sphere-walker": 2000.0})
+    records = fig3a.run_job(job, overrides, "cpu", str(tmp_path), False, None)
+    assert [record["status"] for record in records] == ["failed", "failed"]
+    assert all("sags 0." in record["error"] and "outside 1–10%" in record["error"] for record in records)
+
+
+def test_h5_runs_each_seed_alone():
+    assert fig3a.parse(["--seeds", "4"]).batch == 4 and fig3a.parse(["--seeds", "4", "--batch", "3"]).batch == 3
+    assert fig3a.parse(["--seeds", "4", "--h5"]).batch == 1
+    with pytest.raises(SystemExit):
+        fig3a.parse(["--h5", "--batch", "2"])
