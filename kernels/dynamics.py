@@ -145,6 +145,15 @@ def implicit_anchor_kernel(start: wp.array(dtype=Any), v: wp.array(dtype=Any), p
 
 
 @wp.kernel
+def shell_velocity_kernel(start: wp.array(dtype=Any), x: wp.array(dtype=Any), inverse_dt: Any,
+                          v: wp.array(dtype=Any), predictor: wp.array(dtype=Any), out: wp.array(dtype=Any)):
+    """out = (x − x_n)/dt − (v − v*): the velocity of an implicit step's solution less the ground's change v − v* it
+    was solved with, the shell's own velocity over the step (the next ground pass's predictor)."""
+    i = wp.tid()
+    out[i] = inverse_dt * (x[i] - start[i]) - (v[i] - predictor[i])
+
+
+@wp.kernel
 def extrapolate_kernel(x: wp.array(dtype=Any), v: wp.array(dtype=Any), dt: Any, out: wp.array(dtype=Any)):
     """out = x + dt v: the implicit step's first guess, the last step's velocity carried on."""
     i = wp.tid()
@@ -216,6 +225,8 @@ declare_overloads(overdamped_euler_kernel, forces="vec3[]", inverse_mass="scalar
                   inverse_drag="scalar", gravity="vec3", dt="scalar", x="vec3[]", v="vec3[]")  # fmt: skip
 declare_overloads(implicit_anchor_kernel, start="vec3[]", v="vec3[]", predictor="vec3[]", drift="vec3", dt="scalar",
                   anchors="vec3[]")
+declare_overloads(shell_velocity_kernel, start="vec3[]", x="vec3[]", inverse_dt="scalar", v="vec3[]", predictor="vec3[]",
+                  out="vec3[]")
 declare_overloads(extrapolate_kernel, x="vec3[]", v="vec3[]", dt="scalar", out="vec3[]")
 declare_overloads(step_velocity_kernel, start="vec3[]", x="vec3[]", inverse_dt="scalar", v="vec3[]")
 declare_overloads(reference_ramp_kernel, start="scalar[]", end="scalar[]", fraction="scalar", out="scalar[]")
@@ -258,6 +269,14 @@ def integrate_overdamped_euler(forces, inverse_mass, rigid, inverse_drag: float,
     g = wp.types.vector(3, s)(*gravity)
     wp.launch(overdamped_euler_kernel, dim=len(x), inputs=[forces, inverse_mass, rigid, s(inverse_drag), g, s(dt),
                                                            worlds, int(move)], outputs=[x, v], device=x.device)  # fmt: skip
+
+
+@one_device
+def eval_shell_velocity(start, x, dt: float, v, predictor, out) -> None:
+    """out = (x − x_n)/dt − (v − v*) (`shell_velocity_kernel`)."""
+    s = scalar_of(out)
+    wp.launch(shell_velocity_kernel, dim=len(out), inputs=[start, x, s(1.0 / dt), v, predictor], outputs=[out],
+              device=out.device)
 
 
 @one_device

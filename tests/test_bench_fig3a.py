@@ -149,6 +149,7 @@ def test_a_run_killed_part_way_continues_from_its_trajectory(bench, tmp_path):
     np.testing.assert_allclose(resumed["displacement_R"], whole["displacement_R"], rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_a_batched_job_gives_each_seed_its_own_run(tmp_path, monkeypatch):
     """One twin's three seeds as one batched job (float64), the third world refused by its sag check (stubbed): it is
     recorded failed with its error, and each of the others' JSON holds the displacement series, period and sag of

@@ -27,7 +27,13 @@ from .drag import LumpedDrag
 from .dynamics import OverdampedDynamics, OverdampedSolver
 from .kernels import drag as kernels_drag
 from .kernels import relax as kernels_relax
-from .kernels.dynamics import eval_extrapolate, eval_implicit_anchors, eval_speed_runaway, eval_step_velocity
+from .kernels.dynamics import (
+    eval_extrapolate,
+    eval_implicit_anchors,
+    eval_shell_velocity,
+    eval_speed_runaway,
+    eval_step_velocity,
+)
 from .kernels.implicit_contact import eval_implicit_ground
 from .kernels.relax import BUDGET_SPENT
 from .relax import ROUND_OFF_SLACK, Relaxation, _inverse_stiffness
@@ -47,13 +53,15 @@ class ImplicitOverdampedSolver(OverdampedSolver):
 
     density ρ, drag ζ per unit mass (None: 2 η_ground, as `OverdampedSolver`), drag_frame, gravity and ground as
     `OverdampedSolver`; the ground, if any, must be implicit (`Ground(solve="implicit")`). tol (None: 1e-5 in float32,
-    1e-9 in float64) and max_iterations bound each step's minimisation. The solver adds its drag term to the shell's
-    `terms`, which must be empty: a step's forces are the shell's and the drag's.
+    1e-9 in float64) and max_iterations bound each step's minimisation. ground_passes: the ground's solve and the
+    minimisation taken again this many times, the ground's predictor the last solution's own velocity (a fixed-point
+    iteration of the split: its first-order error falls each pass, BENCHMARKS.md). The solver adds its drag term to
+    the shell's `terms`, which must be empty: a step's forces are the shell's and the drag's.
     """
 
     scheme = "implicit overdamped shell dynamics"
 
-    def __init__(self, shell, *, density, tol=None, max_iterations=STEP_ITERATIONS, **options):
+    def __init__(self, shell, *, density, tol=None, max_iterations=STEP_ITERATIONS, ground_passes=1, **options):
         ground = options.get("ground")
         if ground is not None and ground.solve != "implicit":
             raise ValueError("the implicit overdamped mechanics solve the ground implicitly: use Ground(solve='implicit') "
@@ -67,6 +75,7 @@ class ImplicitOverdampedSolver(OverdampedSolver):
         super().__init__(shell, density=density, **options)
         self.tol = STEP_TOL[shell.scalar] if tol is None else positive("tol", tol)
         self.max_iterations = count("max_iterations", max_iterations, 1)
+        self.ground_passes = count("ground_passes", ground_passes, 1)
         self.drag_term = LumpedDrag(shell)
         shell.terms = (self.drag_term,)
         self.relaxation = Relaxation(shell)
@@ -78,6 +87,7 @@ class ImplicitOverdampedSolver(OverdampedSolver):
             self._start = wp.zeros(n, dtype=self.vec3)
             self._predictor = wp.zeros(n, dtype=self.vec3)
             self._guess = wp.zeros(n, dtype=self.vec3)
+            self._shell_velocity = wp.zeros(n, dtype=self.vec3)
             self.failed = wp.zeros(self.worlds, dtype=wp.int32)  # per world: a step's minimisation did not converge
             self.counts = wp.zeros(2 * self.worlds, dtype=wp.int32)  # per world: CG iterations and steps, summed
         self.drift = tuple(g / self.drag for g in self.gravity_vector)  # g/ζ
@@ -109,22 +119,32 @@ class ImplicitOverdampedSolver(OverdampedSolver):
             wp.copy(self._start, x)
             eval_extrapolate(x, v, dt, self._guess)  # before v becomes the predictor
             self.drag_term.begin_step(x)  # anchored at x_n the drag adds nothing to F(x_n)
-            if self.ground is not None:
+            if self.ground is None:
+                eval_implicit_anchors(self._start, v, v, self.drift, dt, self.drag_term.anchors)  # v − v* = 0
+                self.relaxation.solve(self._guess, x, self.failed, self.counts)
+            else:
                 self.shell.forces_device(x, self._forces)
                 self._rigid_rows(x, v, False)
-                self._integrate(x, v, dt, move=False)
-                wp.copy(self._predictor, v)
-                eval_implicit_ground(self.ground, x, v, self._inverse_mass, self._response_scale(dt), 0.0, self.mask,
-                                     self.shell.tables.patch(), self._rest_area, self._limit_x, self._limit_v,
-                                     self._response, self._others, self._normal_force, self._limit_forces,
-                                     self._forces, self.body, self._coupling)  # dt 0: the penalty at x_n; x stays
-                predictor = self._predictor
-            else:
-                predictor = v  # no ground: v − v* = 0
-            eval_implicit_anchors(self._start, v, predictor, self.drift, dt, self.drag_term.anchors)
-            self.relaxation.solve(self._guess, x, self.failed, self.counts)
+                self._integrate(x, v, dt, move=False)  # v = v*, the explicit predictor
+                for ground_pass in range(self.ground_passes):
+                    if ground_pass:  # the predictor: the last solution's velocity less the ground's change in it
+                        eval_shell_velocity(self._start, x, dt, v, self._predictor, self._shell_velocity)
+                        wp.copy(v, self._shell_velocity)
+                        wp.copy(self._guess, x)
+                        wp.copy(x, self._start)
+                    self._solve_ground(x, v, dt)
+                    eval_implicit_anchors(self._start, v, self._predictor, self.drift, dt, self.drag_term.anchors)
+                    self.relaxation.solve(self._guess, x, self.failed, self.counts)
             eval_step_velocity(self._start, x, dt, v)
             self.drag_term.begin_step(x)
+
+    def _solve_ground(self, x, v, dt: float) -> None:
+        """v ← the per-point implicit ground's velocity from the predictor v (kept in `_predictor`), the penalty at x."""
+        wp.copy(self._predictor, v)
+        eval_implicit_ground(self.ground, x, v, self._inverse_mass, self._response_scale(dt), 0.0, self.mask,
+                             self.shell.tables.patch(), self._rest_area, self._limit_x, self._limit_v, self._response,
+                             self._others, self._normal_force, self._limit_forces, self._forces, self.body,
+                             self._coupling)  # dt 0: the penalty at x_n; x stays
 
     def reset_checks(self) -> None:
         self.failed.zero_()

@@ -78,6 +78,9 @@ class WalkerParameters:
                            "lumped mass", choices=("overdamped", "overdamped-implicit", "inertial"))  # fmt: skip
     implicit_substeps: int = param(1, "overdamped-implicit mechanics: backward-Euler steps per chemistry step (accuracy "
                                    "sets them, not the bending stiffness)", minimum=1)  # fmt: skip
+    ground_passes: int = param(1, "overdamped-implicit mechanics: the ground's solve and the step's minimisation taken "
+                               "this many times, each from the last solution's velocity (the split's error falls each "
+                               "pass)", minimum=1)
     drag: float = param(60.0, "overdamped mechanics: drag ζ per unit mass, a property of the medium, the same at every "
                         "level (60 ≈ 2 η_ground of the level-4 sphere); auto (0) = 2 η_ground of the mesh, which the "
                         "explicit contact needs", minimum=0.0, auto=True)  # fmt: skip
@@ -208,7 +211,7 @@ def walker_dynamics(model, p, dt=None):
     `implicit_step`, no bound)."""
     if p.mechanics == "overdamped-implicit":
         return model.dynamics(overdamped=True, implicit=True, drag=p.drag or None, drag_frame=p.drag_frame,
-                              dt=dt or implicit_step(p))
+                              dt=dt or implicit_step(p), ground_passes=p.ground_passes)
     if p.mechanics == "overdamped":
         dynamics = model.dynamics(overdamped=True, drag=p.drag or None, drag_frame=p.drag_frame, safety=p.safety)
     else:
