@@ -163,9 +163,6 @@ def run_steps(step, steps: int, *, device, graphs: dict, modules, capture: bool,
                 for module in modules:  # with its kernels compiled alone, each for its own default launch
                     for compiled in warp_modules(module):
                         wp.load_module(compiled, device=device)
-                # arrays allocated just before a conditional (capture_while) capture are settled first: without it
-                # compute-sanitizer reports their reads as before allocation and poisons the context (Warp #1406)
-                wp.synchronize_device(device)
                 with wp.ScopedCapture(device=device, force_module_load=False) as scope:
                     for _ in range(length):
                         step()

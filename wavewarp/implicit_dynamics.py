@@ -87,7 +87,6 @@ class ImplicitOverdampedSolver(OverdampedSolver):
             self._start = wp.zeros(n, dtype=self.vec3)
             self._predictor = wp.zeros(n, dtype=self.vec3)
             self._guess = wp.zeros(n, dtype=self.vec3)
-            self._shell_velocity = wp.zeros(n, dtype=self.vec3)
             self.failed = wp.zeros(self.worlds, dtype=wp.int32)  # per world: a step's minimisation did not converge
             self.counts = wp.zeros(2 * self.worlds, dtype=wp.int32)  # per world: CG iterations and steps, summed
         self.drift = tuple(g / self.drag for g in self.gravity_vector)  # g/ζ
@@ -128,8 +127,7 @@ class ImplicitOverdampedSolver(OverdampedSolver):
                 self._integrate(x, v, dt, move=False)  # v = v*, the explicit predictor
                 for ground_pass in range(self.ground_passes):
                     if ground_pass:  # the predictor: the last solution's velocity less the ground's change in it
-                        eval_shell_velocity(self._start, x, dt, v, self._predictor, self._shell_velocity)
-                        wp.copy(v, self._shell_velocity)
+                        eval_shell_velocity(self._start, x, dt, v, self._predictor, v)  # elementwise: in place
                         wp.copy(self._guess, x)
                         wp.copy(x, self._start)
                     self._solve_ground(x, v, dt)

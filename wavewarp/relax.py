@@ -122,16 +122,9 @@ class Relaxation:
         `out` (a device array, may be x), writes them there and returns None; after a STALE stop it
         returns None and writes nothing. `resume` goes on from a STALE stop with the CG state,
         iteration count and budget as they were."""
-        shell, worlds = self.shell, self.shell.worlds
+        shell = self.shell
         if not resume:
-            if self.history is None or len(self.history) != (max_iterations + 1) * worlds:
-                self.history = wp.zeros((max_iterations + 1) * worlds, dtype=wp.float64, device=shell.device)
-                self.forget_graphs()  # the captured loop writes the history array it was captured with
-            search = self.search.numpy().reshape(worlds, SEARCH_SIZE)
-            search[:, TOL:] = np.column_stack([np.full(worlds, tol), np.full(worlds, max_iterations),
-                                               np.broadcast_to(shell.force_scale(), worlds),
-                                               np.full(worlds, ENERGY_NOISE[shell.scalar])])  # fmt: skip
-            self.search.assign(search.ravel())
+            self.prepare(tol, max_iterations)
             wp.copy(self.x, x)
         solve, graphs = (self._resume, self._resume_graphs) if resume else (self._solve, self._graphs)
         if callback is not None:
@@ -151,10 +144,11 @@ class Relaxation:
         return self._result(tol, out)
 
     def prepare(self, tol: float, max_iterations: int) -> None:
-        """Set every world's tolerance and budget for `solve` (on the host, outside captures)."""
+        """Set every world's tolerance and budget (`run` does; `solve` needs it first), on the host, outside captures."""
         shell, worlds = self.shell, self.shell.worlds
-        self.history = wp.zeros((max_iterations + 1) * worlds, dtype=wp.float64, device=shell.device)
-        self.forget_graphs()
+        if self.history is None or len(self.history) != (max_iterations + 1) * worlds:
+            self.history = wp.zeros((max_iterations + 1) * worlds, dtype=wp.float64, device=shell.device)
+            self.forget_graphs()  # the captured loop writes the history array it was captured with
         search = self.search.numpy().reshape(worlds, SEARCH_SIZE)
         search[:, TOL:] = np.column_stack([np.full(worlds, tol), np.full(worlds, max_iterations),
                                            np.broadcast_to(shell.force_scale(), worlds),
